@@ -1,0 +1,45 @@
+"""What every command shares: one-line errors with exit status 2, common options."""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import click
+
+from ropod_sysid.errors import InputError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def fail(message: str) -> None:
+    """Print ``error: message`` on one line to stderr and exit with status 2."""
+    click.echo(f"error: {' '.join(str(message).split())}", err=True)
+    sys.exit(2)
+
+
+def reports_errors(func: F) -> F:
+    """Turn :class:`InputError` (and unreadable files) into one line and exit status 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except InputError as exc:
+            fail(str(exc))
+        except MemoryError:
+            fail("out of memory; use fewer or shorter logs, or a machine with more memory")
+        except KeyboardInterrupt:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+
+    return wrapper  # type: ignore[return-value]
+
+
+quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
+platform_option = click.option(
+    "--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
+    help="Platform YAML (geometry, units; see the data contract).",
+)

@@ -1,0 +1,1 @@
+"""Reading and writing logs (CSV, MCAP) and parameter files."""
