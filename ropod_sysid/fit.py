@@ -1,0 +1,194 @@
+"""Identification: logs in, parameters and an honest account of how well they are determined.
+
+The thesis's method (Sec. VI, App. D-C): per log, A_ID,ext m_ext = b_ID (eq. 36) over all
+samples; the rotational rows are weighted so that their mean square of b_ID equals the
+translational rows' (Sec. VI-A); the weighted systems of all logs are stacked (eq. 37) and
+solved in the least-squares sense (eq. 38) — here by QR triangles (:mod:`ropod_sysid.solve`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import scipy.optimize
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.log import Log
+from ropod_sysid.io.paramfile import ParameterFile
+from ropod_sysid.model import PlatformModel
+from ropod_sysid.params import Friction, kind_of
+from ropod_sysid.platform import Platform
+from ropod_sysid.regressor import Span, preprocess, triangles
+from ropod_sysid.solve import Solution, Triangles, combined_rms, solve, stack_triangles
+
+WeightRotation = Literal["auto", "none"] | float
+
+
+@dataclass
+class FitOptions:
+    """Options of a fit (the ``fit`` command's flags)."""
+
+    friction: Friction = "per-wheel"
+    span: Span = field(default_factory=lambda: Span.parse(None))
+    fix: dict[str, float] = field(default_factory=dict)
+    weight_rotation: WeightRotation = "auto"
+    physical: bool = False
+    input_delay: float | Literal["auto"] = 0.0
+    rcond: float = 1e-7
+    max_delay: float = 0.05
+
+
+@dataclass
+class LogFit:
+    """One log's share of the fit."""
+
+    source: str
+    samples: int
+    weight: float
+    rms: dict[str, float]
+    notes: list[str]
+    triangles: Triangles = field(repr=False)
+
+
+@dataclass
+class FitResult:
+    """Everything a fit produced: values, uncertainty, identifiability, residuals."""
+
+    platform: Platform
+    options: FitOptions
+    solution: Solution
+    logs: list[LogFit]
+    rms: dict[str, float]
+    input_delay: float
+    physical: Solution | None = None
+    physical_rms: dict[str, float] | None = None
+
+    @property
+    def names(self) -> list[str]:
+        return self.solution.names
+
+    @property
+    def samples(self) -> int:
+        return sum(lf.samples for lf in self.logs)
+
+    def values(self) -> dict[str, float]:
+        sol = self.physical or self.solution
+        return dict(zip(sol.names, map(float, sol.values), strict=True))
+
+    def parameter_file(self) -> ParameterFile:
+        """The controller's parameter file (data contract), with the fit's account in extras."""
+        sol = self.solution
+        values = self.physical.values if self.physical is not None else sol.values
+        params: dict[str, dict[str, object]] = {}
+        for j, name in enumerate(sol.names):
+            std = sol.std[j]
+            entry: dict[str, object] = {"value": float(values[j]),
+                                        "std": None if not np.isfinite(std) else float(std)}
+            if sol.combination[j]:
+                entry["combination"] = True
+                entry["meaning"] = sol.combinations.get(name, "")
+            if name in sol.fixed:
+                entry["fixed"] = True
+            params[name] = entry
+        rms = self.physical_rms if self.physical_rms is not None else self.rms
+        extras: dict[str, object] = {
+            "friction": self.options.friction,
+            "span": str(self.options.span),
+            "weight_rotation": [lf.weight for lf in self.logs],
+            "input_delay_s": self.input_delay,
+            "logs": [{"file": lf.source, "samples": lf.samples,
+                      "rms": {"translation": lf.rms["translation"],
+                              "rotation": lf.rms["rotation"]}} for lf in self.logs],
+        }
+        if sol.fixed:
+            extras["fixed"] = dict(sol.fixed)
+        if sol.null_space.shape[1]:
+            extras["null_space"] = sol.null_space_text()
+        if self.physical is not None:
+            extras["physical"] = True
+            extras["rms_free_fit"] = dict(self.rms)
+        return ParameterFile(self.platform.name, params,  # type: ignore[arg-type]
+                             {"translation": rms["translation"], "rotation": rms["rotation"]},
+                             sol.condition_number, sol.rank, self.samples, extras)
+
+
+def physical_bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of a physically consistent fit: masses and inertias ≥ 0; friction dissipative
+    (roll friction ≤ 0 since it is added to the wheel torque, pivot friction ≥ 0; see params)."""
+    lo = np.full(len(names), -np.inf)
+    hi = np.full(len(names), np.inf)
+    for j, name in enumerate(names):
+        kind = kind_of(name)
+        if kind in ("m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w", "fpv", "fpc"):
+            lo[j] = 0.0
+        elif kind in ("fwv", "fwc"):
+            hi[j] = 0.0
+    return lo, hi
+
+
+def _weights(systems: Sequence[Triangles], mode: WeightRotation) -> list[float]:
+    if mode == "auto":
+        return [s.rotation_weight() for s in systems]
+    if mode == "none":
+        return [1.0 for _ in systems]
+    return [float(mode) for _ in systems]
+
+
+def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: FitOptions,
+                ) -> tuple[Solution, list[float]]:
+    """Weight, stack and solve the triangles of several logs."""
+    weights = _weights(systems, options.weight_rotation)
+    r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
+    rows = 3 * sum(s.rows for s in systems)
+    return solve(r, rows, names, options.fix, options.rcond), weights
+
+
+def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None = None,
+             progress: Callable[[str], None] | None = None) -> FitResult:
+    """Fit the dynamic parameters to several logs stacked together (eqs. 36–38)."""
+    options = options or FitOptions()
+    if not logs:
+        raise InputError("no logs given; pass one or more log files")
+    model = PlatformModel(platform)
+    names = model.parameter_names(options.friction)
+    say = progress or (lambda _msg: None)
+
+    notes: dict[str, list[str]] = {}
+
+    def systems_for(delay: float) -> list[Triangles]:
+        out = []
+        for log in logs:
+            say(f"preprocess {log.source}")
+            pre = preprocess(log, platform, options.span, delay)
+            notes[log.source] = pre.notes
+            out.append(triangles(model, pre, options.friction))
+        return out
+
+    delay = 0.0
+    if options.input_delay == "auto":
+        def cost(d: float) -> float:
+            sol, _ = fit_systems(systems_for(d), names, options)
+            return sol.sigma2
+
+        res = scipy.optimize.minimize_scalar(cost, bounds=(0.0, options.max_delay),
+                                             method="bounded", options={"xatol": 2e-4})
+        delay = float(res.x)
+    else:
+        delay = float(options.input_delay)
+    systems = systems_for(delay)
+    solution, weights = fit_systems(systems, names, options)
+    per_log = []
+    for log, s, w in zip(logs, systems, weights, strict=True):
+        per_log.append(LogFit(log.source, s.rows, w, s.rms(solution.values),
+                              notes.get(log.source, []), s))
+    result = FitResult(platform, options, solution, per_log,
+                       combined_rms(systems, solution.values), delay)
+    if options.physical:
+        r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
+        result.physical = solve(r, 3 * sum(s.rows for s in systems), names, options.fix,
+                                options.rcond, bounds=physical_bounds(names))
+        result.physical_rms = combined_rms(systems, result.physical.values)
+    return result
