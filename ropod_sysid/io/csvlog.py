@@ -1,0 +1,452 @@
+"""The contract CSV log: read with checks, write with exact floats.
+
+Reading uses the multi-threaded Arrow CSV reader (the engine behind ``pandas.read_csv(...,
+engine="pyarrow")``, called directly because the pandas wrapper cannot combine explicit column
+names with a column selection). Arrow is strict: a wrong field count or a non-number in a contract
+column stops it. Whenever Arrow stops, or the parsed numbers contain NaN or infinity, the file is
+streamed again through Arrow as text, single-threaded so that line numbers are known, and checked
+with vectorised regular expressions to find the first offending line for the message (or, for
+harmless oddities the fast reader refuses such as whitespace-only lines, to read the data). Only
+if Arrow cannot do even that (e.g. invalid UTF-8) does Python's :mod:`csv` module go row by row.
+
+Line numbers in messages are 1-based lines of the file, the header being line 1.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.csv as pacsv
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.log import Log
+from ropod_sysid.platform import Platform
+
+POSE_COLUMNS = ("x_b", "y_b", "theta_b")
+MIN_SAMPLES = 3
+_DIAG_BLOCK = 1 << 22   # bytes per block when locating an error
+_NUMBER = re.compile(
+    r"^[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)$", re.IGNORECASE
+)
+# Arrow's default null spellings: they parse as missing, which we report as NaN.
+_FINITE_RE = r"^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$"
+_NULLS = {"#n/a", "#n/a n/a", "#na", "-1.#ind", "-1.#qnan", "-nan", "1.#ind", "1.#qnan", "n/a",
+          "na", "null", "nan", "+nan"}
+_UNIT_COLUMN = re.compile(r"^(?:delta_(\w+)|phi_(\w+)[LR]|cur_(\w+)[LR])$")
+
+
+def contract_columns(units: list[str]) -> list[str]:
+    """The required columns for these unit names, in contract order."""
+    cols = ["t"]
+    for u in units:
+        cols += [f"delta_{u}", f"phi_{u}L", f"phi_{u}R", f"cur_{u}L", f"cur_{u}R"]
+    return cols
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+
+
+def read_csv_log(path: str | Path, platform: Platform) -> Log:
+    """Read a contract CSV log for ``platform``.
+
+    Columns ``t``, ``delta_u``, ``phi_uL``, ``phi_uR``, ``cur_uL``, ``cur_uR`` for every unit
+    ``u`` of the platform are required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
+    none); other columns are ignored. Every problem raises :class:`InputError` with one line that
+    names the file, the line and/or column, and the fix.
+    """
+    where = str(path)
+    path = Path(path)
+    header = _read_header(path, where)
+    names = [h.strip() for h in header]
+    units = platform.unit_names
+    required = contract_columns(units)
+    _check_columns(names, required, platform, where)
+    pose_present = [c for c in POSE_COLUMNS if c in names]
+    if pose_present and len(pose_present) < len(POSE_COLUMNS):
+        missing = [c for c in POSE_COLUMNS if c not in names]
+        raise InputError(
+            f"{where}: column{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(repr(c) for c in missing)} missing while "
+            f"{', '.join(repr(c) for c in pose_present)} present; give all three of x_b, y_b, "
+            "theta_b or none"
+        )
+    wanted = required + (list(POSE_COLUMNS) if pose_present else [])
+    index = {name: k for k, name in enumerate(names)}
+    col_idx = [index[c] for c in wanted]
+
+    data = _fast_read(path, len(names), col_idx)
+    if data is None:
+        # Arrow stopped, or there is NaN/inf: find the first bad line (raises), or read the
+        # oddities the fast reader refuses (whitespace-only lines).
+        data = _diagnose(path, where, len(names), wanted, col_idx)
+
+    n = data.shape[1]
+    if n == 0:
+        raise InputError(
+            f"{where}: the file has a header but no data rows; it needs at least "
+            f"{MIN_SAMPLES} samples (one row per sample)"
+        )
+    if n < MIN_SAMPLES:
+        raise InputError(
+            f"{where}: only {n} data row{'s' if n != 1 else ''}; at least {MIN_SAMPLES} samples "
+            "are needed — use a longer log"
+        )
+    t = data[0]
+    steps = np.diff(t)
+    bad = np.flatnonzero(~(steps > 0))
+    if bad.size:
+        k = int(bad[0])
+        lines = _data_row_lines(path, k + 2)
+        raise InputError(
+            f"{where}: line {lines[k + 1]}: time t={float(t[k + 1])!r} is not after "
+            f"t={float(t[k])!r} on line {lines[k]}; time must strictly increase — sort the rows "
+            "or remove repeated samples"
+        )
+
+    n_units = len(units)
+    unit_block = data[1:1 + 5 * n_units].reshape(n_units, 5, n)
+    delta = np.ascontiguousarray(unit_block[:, 0, :].T)
+    phi = np.ascontiguousarray(unit_block[:, 1:3, :].transpose(2, 0, 1))
+    current = np.ascontiguousarray(unit_block[:, 3:5, :].transpose(2, 0, 1))
+    pose = np.ascontiguousarray(data[1 + 5 * n_units:].T) if pose_present else None
+    return Log(t=np.ascontiguousarray(t), units=list(units), delta=delta, phi=phi,
+               current=current, pose=pose, source=where)
+
+
+def _open(path: Path, where: str, binary: bool = False):
+    """Open the log (binary, or as text with undecodable bytes shown as U+FFFD)."""
+    try:
+        if binary:
+            return open(path, "rb")  # noqa: SIM115
+        return open(path, encoding="utf-8-sig", errors="replace", newline="")  # noqa: SIM115
+    except FileNotFoundError:
+        raise InputError(f"{where}: no such log file; check the path") from None
+    except IsADirectoryError:
+        raise InputError(f"{where}: is a directory, not a CSV log file; give the file") from None
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") from None
+
+
+def _read_header(path: Path, where: str) -> list[str]:
+    with _open(path, where, binary=True) as f:
+        try:
+            raw = f.readline()
+            blank_file = not raw.strip() and not any(
+                chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
+            )
+        except OSError as exc:
+            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
+                from None
+    if not raw.strip():
+        if blank_file:
+            raise InputError(
+                f"{where}: the file is empty; a log needs a header row (t, delta_u, phi_uL, "
+                "phi_uR, cur_uL, cur_uR) and data rows"
+            )
+        raise InputError(
+            f"{where}: line 1 is empty; the first line must be the header row naming the columns "
+            "(t, delta_u, phi_uL, …)"
+        )
+    try:
+        first = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise InputError(
+            f"{where}: not a UTF-8 text file (line 1 cannot be decoded); save the log as "
+            "comma-separated UTF-8 text"
+        ) from None
+    try:
+        header = next(csv.reader([first], skipinitialspace=True))
+    except csv.Error as exc:
+        raise InputError(f"{where}: line 1 (header) is not valid CSV ({exc})") from None
+    return header
+
+
+def _check_columns(names: list[str], required: list[str], platform: Platform,
+                   where: str) -> None:
+    seen: dict[str, int] = {}
+    for k, name in enumerate(names):
+        if name in seen and (name in required or name in POSE_COLUMNS):
+            raise InputError(
+                f"{where}: column '{name}' appears twice in the header (columns {seen[name] + 1} "
+                f"and {k + 1}); remove or rename one of them"
+            )
+        seen.setdefault(name, k)
+    missing = [c for c in required if c not in seen]
+    if not missing:
+        return
+    units_txt = ", ".join(platform.unit_names)
+    if "t" in missing and names and _NUMBER.match(names[0]):
+        raise InputError(
+            f"{where}: line 1 looks like data, not a header; the first line must name the "
+            f"columns t, delta_u, phi_uL, phi_uR, cur_uL, cur_uR for units {units_txt}"
+        )
+    if len(names) == 1:
+        for sep, label in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
+            if sep in names[0]:
+                raise InputError(
+                    f"{where}: the header is one column separated by {label}; the log must be "
+                    "comma-separated — re-export it with ',' as separator"
+                )
+    log_units: list[str] = []
+    for name in names:
+        m = _UNIT_COLUMN.match(name)
+        if m:
+            u = next(g for g in m.groups() if g is not None)
+            if u not in log_units:
+                log_units.append(u)
+    absent = [u for u in platform.unit_names if u not in log_units]
+    if log_units and absent:
+        raise InputError(
+            f"{where}: the log has columns for unit{'s' if len(log_units) > 1 else ''} "
+            f"{', '.join(log_units)} but the platform '{platform.name}' expects units "
+            f"{units_txt}; use the platform file that matches the log or rename the columns "
+            "(delta_u, phi_uL, …)"
+        )
+    shown = ", ".join(repr(c) for c in missing[:6])
+    more = f" and {len(missing) - 6} more" if len(missing) > 6 else ""
+    verb = "is" if len(missing) == 1 else "are"
+    raise InputError(
+        f"{where}: column{'s' if len(missing) > 1 else ''} {shown}{more} {verb} missing; the log "
+        f"needs t, delta_u, phi_uL, phi_uR, cur_uL, cur_uR for units {units_txt}"
+    )
+
+
+def _fast_read(path: Path, n_cols: int, col_idx: list[int]) -> np.ndarray | None:
+    """All wanted columns as a (k, N) float64 array, or None if Arrow cannot read the file
+    cleanly or a value is NaN or infinite."""
+    arrow_names = [f"c{k}" for k in range(n_cols)]
+    include = [arrow_names[k] for k in col_idx]
+    try:
+        table = pacsv.read_csv(
+            path,
+            read_options=pacsv.ReadOptions(column_names=arrow_names, skip_rows=1),
+            parse_options=pacsv.ParseOptions(delimiter=","),
+            convert_options=pacsv.ConvertOptions(
+                column_types={c: pa.float64() for c in include}, include_columns=include,
+            ),
+        )
+    except (pa.ArrowException, ValueError, OSError):
+        return None
+    n = table.num_rows
+    out = np.empty((len(include), n), dtype=np.float64)
+    for j, c in enumerate(include):
+        col = table.column(c)
+        if col.null_count:
+            return None
+        out[j] = col.to_numpy()
+    if n and not np.isfinite(out).all():
+        return None
+    return out
+
+
+def _diagnose(path: Path, where: str, n_fields: int, wanted: list[str],
+              col_idx: list[int]) -> np.ndarray:
+    """Error path: stream the file through Arrow as text, single-threaded so that Arrow knows
+    the line numbers; raise for the first bad line, or return the data when nothing is wrong
+    but blank-looking lines. Falls back to the csv module if Arrow cannot even do that."""
+    arrow_names = [f"c{k}" for k in range(n_fields)]
+    skipped: list[int] = []                 # lines Arrow did not turn into rows, ascending
+    invalid: list[tuple[int, int]] = []     # (line, fields) of non-blank wrong-length rows
+
+    def on_invalid(row: Any) -> str:
+        if row.number is None:
+            raise _NoLineNumbers
+        skipped.append(row.number)
+        if row.text.strip():
+            invalid.append((row.number, row.actual_columns))
+        return "skip"
+
+    def line_of(r: int) -> int:
+        line = 2 + r
+        for s in skipped:
+            if s > line:
+                break
+            line += 1
+        return line
+
+    def count_error(last: bool) -> InputError:
+        line, got = invalid[0]
+        if last and got < n_fields:
+            return InputError(
+                f"{where}: the last line ({line}) has {got} of {n_fields} fields — the file "
+                f"looks truncated; remove line {line}"
+            )
+        hint = " (or add the missing column names to the header)" if got > n_fields else ""
+        return InputError(
+            f"{where}: line {line} has {got} field{'s' if got != 1 else ''} but the header has "
+            f"{n_fields}; fix or remove that line{hint}"
+        )
+
+    order = sorted(range(len(col_idx)), key=col_idx.__getitem__)   # file column order
+    chunks: list[np.ndarray] = []
+    row0 = 0
+    last_data_line = 0
+    try:
+        reader = pacsv.open_csv(
+            path,
+            read_options=pacsv.ReadOptions(use_threads=False, column_names=arrow_names,
+                                           skip_rows=1, block_size=_DIAG_BLOCK),
+            parse_options=pacsv.ParseOptions(delimiter=",", ignore_empty_lines=False,
+                                             invalid_row_handler=on_invalid),
+            convert_options=pacsv.ConvertOptions(
+                column_types={c: pa.string() for c in arrow_names},
+                strings_can_be_null=False, quoted_strings_can_be_null=False,
+            ),
+        )
+        for batch in reader:
+            n = batch.num_rows
+            cols = [pc.utf8_trim_whitespace(batch.column(k)) for k in range(n_fields)]
+            blank = np.ones(n, dtype=bool)
+            for c in cols:
+                blank &= pc.equal(c, "").to_numpy(zero_copy_only=False)
+            first: tuple[int, int] | None = None
+            for j in order:
+                ok = pc.match_substring_regex(cols[col_idx[j]], _FINITE_RE)
+                bad = np.flatnonzero(~ok.to_numpy(zero_copy_only=False) & ~blank)
+                if bad.size and (first is None or bad[0] < first[0]):
+                    first = (int(bad[0]), j)
+            if first is not None:
+                line = line_of(row0 + first[0])
+                if not invalid or line < invalid[0][0]:
+                    raw = batch.column(col_idx[first[1]])[first[0]].as_py()
+                    problem = _value_problem(raw) or "is not a finite number"
+                    raise InputError(f"{where}: line {line}, column '{wanted[first[1]]}' "
+                                     f"{problem}")
+            data_rows = np.flatnonzero(~blank)
+            if data_rows.size:
+                last_data_line = line_of(row0 + int(data_rows[-1]))
+            if invalid and (len(invalid) > 1 and invalid[1][0] <= last_data_line
+                            or last_data_line > invalid[0][0]):
+                raise count_error(last=False)
+            if not invalid:
+                keep = pa.array(~blank)
+                chunks.append(np.array(
+                    [pc.cast(pc.filter(cols[k], keep), pa.float64()).to_numpy() for k in col_idx],
+                    dtype=np.float64).reshape(len(col_idx), -1))
+            row0 += n
+    except _NoLineNumbers:
+        return _slow_read(path, where, n_fields, wanted, col_idx)
+    except pa.ArrowException:
+        return _slow_read(path, where, n_fields, wanted, col_idx)
+    if invalid:
+        raise count_error(last=len(invalid) == 1 and last_data_line < invalid[0][0])
+    if not chunks:
+        return np.empty((len(col_idx), 0), dtype=np.float64)
+    return np.concatenate(chunks, axis=1)
+
+
+class _NoLineNumbers(Exception):
+    pass
+
+
+def _records(path: Path, where: str) -> Iterator[tuple[int, list[str]]]:
+    """Non-blank data records after the header, with the file line each starts on."""
+    with _open(path, where) as f:
+        reader = csv.reader(f, skipinitialspace=True)
+        try:
+            next(reader)
+            prev = reader.line_num
+            for rec in reader:
+                start, prev = prev + 1, reader.line_num
+                if not rec or all(not field.strip() for field in rec):
+                    continue
+                yield start, rec
+        except csv.Error as exc:
+            raise InputError(
+                f"{where}: line {reader.line_num + 1} is not valid CSV ({exc}); fix or remove it"
+            ) from None
+
+
+def _value_problem(text: str) -> str | None:
+    s = text.strip()
+    low = s.lower()
+    if not s:
+        return "is empty; every contract column needs a number on every line — fill it in or " \
+               "remove the line"
+    if low in _NULLS:
+        return f"is NaN ({s!r}); the log must be finite — repair or remove the line"
+    if not _NUMBER.match(s):
+        return f"has {s!r}, which is not a number; fix the value or remove the line"
+    if low.lstrip("+-") in ("inf", "infinity"):
+        return f"is infinite ({s!r}); the log must be finite — repair or remove the line"
+    return None
+
+
+def _slow_read(path: Path, where: str, n_fields: int, wanted: list[str],
+               col_idx: list[int]) -> np.ndarray:
+    """Last resort, per-row Python: raise for the first bad line, else return the data."""
+    rows: list[list[float]] = []
+    short: tuple[int, int] | None = None   # (line, fields) of a short record, maybe the last
+    isfinite = math.isfinite
+    for line, rec in _records(path, where):
+        if short is not None:
+            raise InputError(
+                f"{where}: line {short[0]} has {short[1]} field{'s' if short[1] != 1 else ''} but "
+                f"the header has {n_fields}; fix or remove that line"
+            )
+        if len(rec) < n_fields:
+            short = (line, len(rec))
+            continue
+        if len(rec) > n_fields:
+            raise InputError(
+                f"{where}: line {line} has {len(rec)} fields but the header has {n_fields}; "
+                "fix or remove that line (or add the missing column names to the header)"
+            )
+        fields = [rec[k] for k in col_idx]
+        try:
+            values = list(map(float, fields))
+            ok = all(map(isfinite, values)) and "_" not in "".join(fields)
+        except ValueError:
+            ok = False
+        if not ok:
+            for j, text in enumerate(fields):
+                problem = _value_problem(text)
+                if problem is not None:
+                    raise InputError(f"{where}: line {line}, column '{wanted[j]}' {problem}")
+            raise InputError(f"{where}: line {line} has a value that is not a number; fix or "
+                             "remove that line")
+        rows.append(values)
+    if short is not None:
+        raise InputError(
+            f"{where}: the last line ({short[0]}) has {short[1]} of {n_fields} fields — the file "
+            f"looks truncated; remove line {short[0]}"
+        )
+    return np.array(rows, dtype=np.float64).reshape(-1, len(col_idx)).T
+
+
+def _data_row_lines(path: Path, count: int) -> list[int]:
+    """File line numbers of the first ``count`` data rows (error path only)."""
+    lines: list[int] = []
+    for line, _ in _records(path, str(path)):
+        lines.append(line)
+        if len(lines) >= count:
+            break
+    return lines
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+
+
+def write_csv_log(log: Log, path: str | Path) -> None:
+    """Write ``log`` as a contract CSV (columns of :meth:`Log.columns`), atomically.
+
+    Floats are written in the shortest form that reads back to the identical float64, so
+    :func:`read_csv_log` of the written file returns bit-identical arrays.
+    """
+    cols = log.columns()
+    table = pa.table({k: np.ascontiguousarray(v, dtype=np.float64) for k, v in cols.items()})
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write((",".join(cols) + "\n").encode("utf-8"))
+        pacsv.write_csv(table, f, pacsv.WriteOptions(include_header=False,
+                                                     quoting_style="needed"))
