@@ -91,17 +91,33 @@ def read_csv_log(path: str | Path, platform: Platform) -> Log:
         data = _diagnose(path, where, len(names), wanted, col_idx)
 
     n = data.shape[1]
+    _check_rows_and_time(path, where, data[0], MIN_SAMPLES)
+    t = data[0]
+
+    n_units = len(units)
+    unit_block = data[1:1 + 5 * n_units].reshape(n_units, 5, n)
+    delta = np.ascontiguousarray(unit_block[:, 0, :].T)
+    phi = np.ascontiguousarray(unit_block[:, 1:3, :].transpose(2, 0, 1))
+    current = np.ascontiguousarray(unit_block[:, 3:5, :].transpose(2, 0, 1))
+    pose = np.ascontiguousarray(data[1 + 5 * n_units:].T) if pose_present else None
+    return Log(t=np.ascontiguousarray(t), units=list(units), delta=delta, phi=phi,
+               current=current, pose=pose, source=where)
+
+
+
+def _check_rows_and_time(path: Path, where: str, t: np.ndarray, min_rows: int) -> None:
+    """Enough data rows, and strictly increasing time (one-line errors with file lines)."""
+    n = t.shape[0]
     if n == 0:
         raise InputError(
             f"{where}: the file has a header but no data rows; it needs at least "
-            f"{MIN_SAMPLES} samples (one row per sample)"
+            f"{min_rows} samples (one row per sample)"
         )
-    if n < MIN_SAMPLES:
+    if n < min_rows:
         raise InputError(
-            f"{where}: only {n} data row{'s' if n != 1 else ''}; at least {MIN_SAMPLES} samples "
+            f"{where}: only {n} data row{'s' if n != 1 else ''}; at least {min_rows} samples "
             "are needed — use a longer log"
         )
-    t = data[0]
     steps = np.diff(t)
     bad = np.flatnonzero(~(steps > 0))
     if bad.size:
@@ -113,15 +129,39 @@ def read_csv_log(path: str | Path, platform: Platform) -> Log:
             "or remove repeated samples"
         )
 
-    n_units = len(units)
-    unit_block = data[1:1 + 5 * n_units].reshape(n_units, 5, n)
-    delta = np.ascontiguousarray(unit_block[:, 0, :].T)
-    phi = np.ascontiguousarray(unit_block[:, 1:3, :].transpose(2, 0, 1))
-    current = np.ascontiguousarray(unit_block[:, 3:5, :].transpose(2, 0, 1))
-    pose = np.ascontiguousarray(data[1 + 5 * n_units:].T) if pose_present else None
-    return Log(t=np.ascontiguousarray(t), units=list(units), delta=delta, phi=phi,
-               current=current, pose=pose, source=where)
 
+def read_numeric_table(path: str | Path, required: list[str],
+                       min_rows: int = 2) -> dict[str, np.ndarray]:
+    """Read a numeric CSV table (setpoints, force schedules) with the log reader's checks.
+
+    ``required`` names the columns to return; the first must be the time column ``t``, which
+    must strictly increase. Other columns are ignored. Errors are one line naming the file,
+    the line and the column.
+    """
+    where = str(path)
+    path = Path(path)
+    names = [h.strip() for h in _read_header(path, where)]
+    seen: dict[str, int] = {}
+    for k, name in enumerate(names):
+        if name in seen and name in required:
+            raise InputError(
+                f"{where}: column '{name}' appears twice in the header (columns {seen[name] + 1} "
+                f"and {k + 1}); remove or rename one of them"
+            )
+        seen.setdefault(name, k)
+    missing = [c for c in required if c not in seen]
+    if missing:
+        raise InputError(
+            f"{where}: column{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(repr(c) for c in missing)} missing; the file needs the columns "
+            f"{', '.join(required)} (header row first)"
+        )
+    col_idx = [seen[c] for c in required]
+    data = _fast_read(path, len(names), col_idx)
+    if data is None:
+        data = _diagnose(path, where, len(names), list(required), col_idx)
+    _check_rows_and_time(path, where, data[0], min_rows)
+    return {c: np.ascontiguousarray(data[j]) for j, c in enumerate(required)}
 
 def _open(path: Path, where: str, binary: bool = False):
     """Open the log (binary, or as text with undecodable bytes shown as U+FFFD)."""

@@ -1,0 +1,116 @@
+"""``ropod-sysid fit``: logs in, the controller's parameter file out."""
+
+from __future__ import annotations
+
+import click
+
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.errors import InputError
+from ropod_sysid.fit import FitOptions, fit_logs
+from ropod_sysid.io import read_log
+from ropod_sysid.io.paramfile import write_parameter_file
+from ropod_sysid.platform import load_platform
+from ropod_sysid.regressor import Span
+from ropod_sysid.summary import format_fit
+
+
+def parse_fix(items: tuple[str, ...]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise InputError(f"--fix {item!r}: use NAME=VALUE, e.g. --fix m_b=35.1") from None
+    return out
+
+
+def parse_weight(text: str) -> str | float:
+    if text in ("auto", "none"):
+        return text
+    try:
+        w = float(text)
+    except ValueError:
+        raise InputError(f"--weight-rotation {text!r}: use auto, none or a positive number"
+                         ) from None
+    if not w > 0:
+        raise InputError(f"--weight-rotation {text!r}: the weight must be positive")
+    return w
+
+
+def parse_delay(text: str) -> str | float:
+    if text == "auto":
+        return text
+    try:
+        d = float(text.removesuffix("s"))
+    except ValueError:
+        raise InputError(f"--input-delay {text!r}: use auto or seconds, e.g. 0.0025") from None
+    if d < 0:
+        raise InputError(f"--input-delay {text!r}: the delay cannot be negative")
+    return d
+
+
+def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_rotation: str,
+                physical: bool, input_delay: str, rcond: float) -> FitOptions:
+    return FitOptions(friction=friction,  # type: ignore[arg-type]
+                      span=Span.parse(span), fix=parse_fix(fix),
+                      weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
+                      physical=physical, input_delay=parse_delay(input_delay),  # type: ignore
+                      rcond=rcond)
+
+
+@click.command("fit")
+@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@platform_option
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="Parameter file to write.")
+@click.option("--format", "fmt", type=click.Choice(["json", "yaml", "ros2", "kelo"]),
+              default="json", show_default=True, help="Parameter file format.")
+@click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
+              show_default=True, help="Friction coefficients per wheel and pivot, or shared.")
+@click.option("--span", default=None,
+              help="LOESS span: samples (21) or seconds (0.1s). Default 0.1s.")
+@click.option("--fix", multiple=True, metavar="NAME=VALUE",
+              help="Hold a parameter fixed (repeatable), e.g. the weighed masses.")
+@click.option("--weight-rotation", default="auto", show_default=True,
+              help="auto (Sec. VI-A), none, or a number.")
+@click.option("--physical", is_flag=True,
+              help="Physically consistent fit (bounded least squares); RMS cost reported.")
+@click.option("--input-delay", default="0", show_default=True,
+              help="Lag of the motion behind the logged torque: seconds or auto.")
+@click.option("--rcond", default=1e-7, show_default=True,
+              help="Relative singular value below which a direction counts as unidentifiable.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write the HTML fit report here.")
+@click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
+              help="With --report: a parameter file shown side by side.")
+@click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
+              help="With --report: validation log (repeatable).")
+@quiet_option
+@reports_errors
+def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
+            span: str | None, fix: tuple[str, ...], weight_rotation: str, physical: bool,
+            input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
+            validate_logs: tuple[str, ...], quiet: bool) -> None:
+    """Fit the dynamic parameters to LOGS (stacked) and write the parameter file."""
+    platform = load_platform(platform_path)
+    options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond)
+    loaded = [read_log(p, platform) for p in logs]
+
+    def say(msg: str) -> None:
+        if not quiet:
+            click.echo(msg, err=True)
+
+    result = fit_logs(loaded, platform, options)
+    write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
+    if report_path is not None:
+        from ropod_sysid.report import write_fit_report
+
+        write_fit_report(result, loaded, report_path, compare=compare_path,
+                         validation_logs=[read_log(p, platform) for p in validate_logs])
+        say(f"wrote {report_path}")
+    if not quiet:
+        click.echo(format_fit(result))
+    say(f"wrote {out_path}")

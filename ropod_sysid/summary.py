@@ -1,0 +1,96 @@
+"""Plain-text summaries of fits and validations for the terminal."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ropod_sysid.fit import FitResult
+from ropod_sysid.params import UNITS_OF, kind_of
+from ropod_sysid.validate import LogValidation
+
+
+def identifiability_verdict(result: FitResult) -> str:
+    """One sentence on how well the data determine the parameters."""
+    sol = result.solution
+    free = len(sol.names) - len(sol.fixed)
+    if sol.rank < free:
+        return (f"rank deficient: {free - sol.rank} parameter combination(s) cannot be "
+                f"separated by these logs; {int(sol.combination.sum())} values are determined "
+                "only in combination (see the null space)")
+    rel = relative_std(result)
+    worst = int(np.nanargmax(rel)) if np.any(np.isfinite(rel)) else 0
+    if sol.condition_number > 1e4 or rel[worst] > 0.2:
+        return (f"full rank but weakly determined: condition number "
+                f"{sol.condition_number:.3g}, worst relative std {100 * rel[worst]:.1f}% "
+                f"({sol.names[worst]})")
+    return (f"well determined: full rank, condition number {sol.condition_number:.3g}, "
+            f"worst relative std {100 * rel[worst]:.1f}% ({sol.names[worst]})")
+
+
+def relative_std(result: FitResult) -> np.ndarray:
+    sol = result.solution
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.abs(sol.std / sol.values)
+
+
+def implausible(name: str, value: float) -> bool:
+    """Physically implausible: negative mass or inertia."""
+    return kind_of(name) in ("m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w") and value < 0
+
+
+def format_fit(result: FitResult) -> str:
+    """Parameter table, RMS per translation/rotation and per log, rank and condition."""
+    sol = result.solution
+    shown = result.physical.values if result.physical is not None else sol.values
+    rel = relative_std(result)
+    lines = []
+    head = "physically consistent fit" if result.physical is not None else "fit"
+    lines.append(f"{head}: {len(result.logs)} log(s), {result.samples} samples, "
+                 f"friction {result.options.friction}, span {result.options.span}")
+    lines.append(f"{'parameter':<10} {'value':>12} {'std':>10} {'rel.std':>8}  unit        note")
+    for j, name in enumerate(sol.names):
+        notes = []
+        if name in sol.fixed:
+            notes.append("fixed")
+        if sol.combination[j]:
+            notes.append("combination: " + sol.combinations.get(name, ""))
+        if implausible(name, shown[j]):
+            notes.append("implausible (negative)")
+        std = "" if not np.isfinite(sol.std[j]) else f"{sol.std[j]:.4g}"
+        rs = "" if not np.isfinite(rel[j]) else f"{100 * rel[j]:.1f}%"
+        unit = UNITS_OF.get(kind_of(name), "")
+        lines.append(f"{name:<10} {shown[j]:>12.5g} {std:>10} {rs:>8}  {unit:<11} "
+                     + "; ".join(notes))
+    lines.append(f"RMS residual: translation {result.rms['translation']:.4g} N, rotation "
+                 f"{result.rms['rotation']:.4g} N m (all logs, unweighted)")
+    if result.physical_rms is not None:
+        lines.append(f"RMS of the physically consistent fit: translation "
+                     f"{result.physical_rms['translation']:.4g} N, rotation "
+                     f"{result.physical_rms['rotation']:.4g} N m")
+    for lf in result.logs:
+        lines.append(f"  {lf.source}: {lf.samples} samples, RMS {lf.rms['translation']:.4g} N"
+                     f" / {lf.rms['rotation']:.4g} N m, rotation weight {lf.weight:.3g}")
+        for note in lf.notes:
+            lines.append(f"    note: {note}")
+    lines.append(f"rank {sol.rank} of {len(sol.names) - len(sol.fixed)} free parameters, "
+                 f"condition number {sol.condition_number:.4g} (column-scaled)")
+    if result.input_delay:
+        lines.append(f"input delay {1000 * result.input_delay:.2f} ms")
+    for text in sol.null_space_text():
+        lines.append(f"  not separable: {text} = 0 direction")
+    lines.append(identifiability_verdict(result))
+    return "\n".join(lines)
+
+
+def format_validation(results: Sequence[LogValidation]) -> str:
+    lines = [f"{'log':<30} {'samples':>8} {'x [N]':>8} {'y [N]':>8} {'θ [Nm]':>8} "
+             f"{'F̂ rms':>8} {'T̂ rms':>8} {'>40N':>6} {'>10Nm':>6}"]
+    for v in results:
+        f_rms = float(np.hypot(v.observer_rms["F_bx"], v.observer_rms["F_by"]))
+        lines.append(f"{v.source[-30:]:<30} {v.samples:>8} {v.rms['x']:>8.3g} "
+                     f"{v.rms['y']:>8.3g} {v.rms['theta']:>8.3g} {f_rms:>8.3g} "
+                     f"{v.observer_rms['T_bz']:>8.3g} {100 * v.share_above['force']:>5.1f}% "
+                     f"{100 * v.share_above['torque']:>5.1f}%")
+    return "\n".join(lines)
