@@ -23,12 +23,27 @@ from ropod_sysid.platform import Platform
 
 def _turn(v: np.ndarray) -> np.ndarray:
     """S v for S = [[0, −1], [1, 0]] on the last axis."""
-    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+    out = np.empty_like(v)
+    np.negative(v[..., 1], out=out[..., 0])
+    out[..., 1] = v[..., 0]
+    return out
 
 
 def _rot(c: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """R(θ) r for r of shape (2,) or broadcastable (…, 2), with c = cos θ, s = sin θ."""
-    return np.stack([c * r[..., 0] - s * r[..., 1], s * r[..., 0] + c * r[..., 1]], axis=-1)
+    """R(θ) r for r of shape (…, 2) broadcast against c = cos θ, s = sin θ."""
+    shape = np.broadcast_shapes(np.shape(c), r.shape[:-1])
+    out = np.empty((*shape, 2))
+    out[..., 0] = c * r[..., 0] - s * r[..., 1]
+    out[..., 1] = s * r[..., 0] + c * r[..., 1]
+    return out
+
+
+def _pair(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Stack two equally shaped arrays on a new last axis (faster than np.stack)."""
+    out = np.empty((*a.shape, 2))
+    out[..., 0] = a
+    out[..., 1] = b
+    return out
 
 
 @dataclass
@@ -153,36 +168,39 @@ class SwivelUnits:
         b_ib = -(w_b**2) * p
 
         # unit rotation θ̈_i (eqs. 24–26)
-        a_theta = np.stack([-s_i, c_i, px * c_d + py * s_d], axis=-1) / self.s_w
+        a_theta = np.empty((n, k, 3))
+        np.divide(-s_i, self.s_w, out=a_theta[..., 0])
+        np.divide(c_i, self.s_w, out=a_theta[..., 1])
+        a_theta[..., 2] = (px * c_d + py * s_d) / self.s_w
         b_theta = (-c_i * theta_i_dot * qd[:, 0:1] - s_i * theta_i_dot * qd[:, 1:2]
                    + thd_b[:, None] * (-px * s_d + py * c_d) * delta_dot) / self.s_w
 
         def body_point(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            """Velocity and acceleration parametrisation of a hub-fixed point (eqs. 9, 10, 27)."""
-            v = _rot(c_i, s_i, r)  # (N, k, 2) = R_i r
+            """Velocity and acceleration parametrisation of hub-fixed points r (m, 2) in the
+            unit frame (eqs. 9, 10, 27); shapes (N, k, m, 2), (N, k, m, 2, 3), (N, k, m, 2)."""
+            v = _rot(c_i[..., None], s_i[..., None], r)  # R_i r
             sv = _turn(v)
-            vel = rd_ib + w_i * sv  # (9b)/(10b)
-            a = a_ib + sv[..., :, None] * a_theta[..., None, :]  # App. B, eqs. 45–48
-            b = b_ib + sv * b_theta[..., None] - w_i**2 * v
+            wi = w_i[..., None]
+            vel = rd_ib[..., None, :] + wi * sv  # (9b)/(10b)
+            a = a_ib[:, :, None] + sv[..., :, None] * a_theta[:, :, None, None, :]  # App. B
+            b = b_ib[:, :, None] + sv * b_theta[..., None, None] - wi**2 * v
             return vel, a, b
 
-        rd_cm, a_cm, b_cm = body_point(self.r_cm)
-        a_qcm = np.concatenate([a_cm, a_theta[..., None, :]], axis=-2)  # (23)
-        b_qcm = np.concatenate([b_cm, b_theta[..., None]], axis=-1)
-
-        rd_w = np.empty((n, k, 2, 2))
-        a_phi = np.empty((n, k, 2, 3))
-        b_phi = np.empty((n, k, 2))
-        e_x = np.stack([c_i, s_i], axis=-1)  # unit forward direction e_x^i
-        e_y = np.stack([-s_i, c_i], axis=-1)
-        for j in range(2):  # wheels L, R (two, not per sample)
-            vel, a, b = body_point(self.r_wheels[j])
-            rd_w[..., j, :] = vel
-            # eq. 30: φ̈ = (e_x·r̈_w + θ̇_i e_y·ṙ_w) / R_w
-            a_phi[..., j, :] = np.einsum("nkc,nkcq->nkq", e_x, a) / self.r_w
-            b_phi[..., j] = (np.einsum("nkc,nkc->nk", e_x, b)
-                             + theta_i_dot * np.einsum("nkc,nkc->nk", e_y, vel)) / self.r_w
-        wheel_rate = np.einsum("nkc,nkjc->nkj", e_x, rd_w) / self.r_w  # (11)
+        vel, acc_a, acc_b = body_point(np.vstack([self.r_cm, self.r_wheels]))
+        rd_cm, a_cm, b_cm = vel[:, :, 0], acc_a[:, :, 0], acc_b[:, :, 0]
+        a_qcm = np.empty((n, k, 3, 3))  # (23)
+        a_qcm[..., :2, :] = a_cm
+        a_qcm[..., 2, :] = a_theta
+        b_qcm = np.empty((n, k, 3))
+        b_qcm[..., :2] = b_cm
+        b_qcm[..., 2] = b_theta
+        rd_w, a_w, b_w = vel[:, :, 1:], acc_a[:, :, 1:], acc_b[:, :, 1:]  # wheels L, R
+        e_x = _pair(c_i, s_i)[:, :, None]  # unit forward direction e_x^i, (N, k, 1, 2)
+        e_y = _pair(-s_i, c_i)[:, :, None]
+        # eq. 30: φ̈ = (e_x·r̈_w + θ̇_i e_y·ṙ_w) / R_w
+        a_phi = (e_x[..., None] * a_w).sum(axis=-2) / self.r_w
+        b_phi = ((e_x * b_w).sum(-1) + w_i * (e_y * rd_w).sum(-1)) / self.r_w
+        wheel_rate = (e_x * rd_w).sum(-1) / self.r_w  # (11)
 
         # hub equations of motion (18–21)
         a_iwh = np.empty((n, k, 3, 3))
