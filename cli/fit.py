@@ -11,6 +11,7 @@ from ropod_sysid.io import read_log
 from ropod_sysid.io.paramfile import write_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
+from ropod_sysid.solve import RCOND
 from ropod_sysid.summary import format_fit
 
 
@@ -80,7 +81,7 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
               help="Physically consistent fit (bounded least squares); RMS cost reported.")
 @click.option("--input-delay", default="0", show_default=True,
               help="Lag of the motion behind the logged torque: seconds or auto.")
-@click.option("--rcond", default=1e-7, show_default=True,
+@click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the HTML fit report here.")

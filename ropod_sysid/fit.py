@@ -22,7 +22,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Friction, kind_of
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span, preprocess, triangles
-from ropod_sysid.solve import Solution, Triangles, combined_rms, solve, stack_triangles
+from ropod_sysid.solve import RCOND, Solution, Triangles, combined_rms, solve, stack_triangles
 
 WeightRotation = Literal["auto", "none"] | float
 
@@ -37,7 +37,7 @@ class FitOptions:
     weight_rotation: WeightRotation = "auto"
     physical: bool = False
     input_delay: float | Literal["auto"] = 0.0
-    rcond: float = 1e-7
+    rcond: float = RCOND
     max_delay: float = 0.05
 
 

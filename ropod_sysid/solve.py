@@ -23,6 +23,8 @@ import scipy.optimize
 from ropod_sysid.errors import IdentifiabilityError, InputError
 
 DOF = ("x", "y", "theta")
+NULL_TOL = 1e-3  # relative size below which a null-space entry is treated as zero
+RCOND = 1e-4  # default: relative singular value below which a direction is unidentifiable
 
 
 def qr_triangle(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
@@ -146,7 +148,7 @@ class Solution:
 
 
 def solve(r: np.ndarray, rows: int, names: Sequence[str],
-          fixed: Mapping[str, float] | None = None, rcond: float = 1e-7,
+          fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
           bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Solution:
     """Solve min ‖A m − b‖ from the triangle ``r`` of [A | b] (weighted, stacked).
 
@@ -190,26 +192,33 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     cov = np.full((p, p), np.nan)
 
     if rank < q_free:
-        # base parameters: column-pivoted QR picks `rank` independent scaled columns
-        _, _, piv = scipy.linalg.qr(cs, mode="economic", pivoting=True)
-        base, dep = np.sort(piv[:rank]), np.sort(piv[rank:])
+        # Null space of the column-scaled regressor; entries below NULL_TOL of a vector's
+        # largest are noise of a numerically (not exactly) singular system.
         _, _, vt = np.linalg.svd(cs)
-        n_scaled = vt[rank:].T  # (q, q-rank) null space of the scaled columns
-        n_free = n_scaled / scale[:, None]
-        n_free /= np.linalg.norm(n_free, axis=0)
-        null = np.zeros((p, n_free.shape[1]))
-        null[free] = n_free
-        # x_B = true_B + K true_D with K = −N_B N_D⁻¹ (any solution ± null space)
-        k_mat = -n_free[base] @ np.linalg.inv(n_free[dep])
+        ns = vt[rank:].T  # (q, q - rank), scaled coordinates
+        ns = np.where(np.abs(ns) >= NULL_TOL * np.abs(ns).max(axis=0), ns, 0.0)
+        # dependent parameters: the most involved ones (pivoted QR of the null space rows)
+        _, _, piv = scipy.linalg.qr(ns.T, mode="economic", pivoting=True)
+        dep = np.sort(piv[: q_free - rank])
+        base = np.setdiff1d(np.arange(q_free), dep)
+        n_free = ns / scale[:, None]
+        null = np.zeros((p, ns.shape[1]))
+        null[free] = n_free / np.linalg.norm(n_free, axis=0)
+        # any solution ± null space: setting x_D = 0 leaves x_B = true_B + K true_D
+        k_scaled = -ns[base] @ np.linalg.inv(ns[dep])
+        k_scaled[np.abs(k_scaled) < NULL_TOL] = 0.0
+        k_mat = k_scaled * scale[dep][None, :] / scale[base][:, None]
         for bi, jb in enumerate(base):
             terms = [f"{k_mat[bi, di]:+.4g}·{names[free[jd]]}"
-                     for di, jd in enumerate(dep) if abs(k_mat[bi, di]) > 1e-9]
+                     for di, jd in enumerate(dep) if k_scaled[bi, di] != 0.0]
             if terms:
                 combination[free[jb]] = True
                 combinations[names[free[jb]]] = f"{names[free[jb]]} " + " ".join(terms)
         for jd in dep:
             combination[free[jd]] = True
-            combinations[names[free[jd]]] = "not identifiable alone: set to 0"
+            combinations[names[free[jd]]] = (
+                f"not identifiable from these logs; set to 0 (fix it, e.g. --fix "
+                f"{names[free[jd]]}=VALUE, to separate the combination)")
         cols = base
     else:
         cols = np.arange(q_free)
