@@ -1,0 +1,70 @@
+"""Shared, session-scoped simulations: simulated once, used by every test that needs a run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ropod_sysid.params import thesis_fixed_masses
+from ropod_sysid.platform import Platform, ropod_platform
+from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
+
+# attachment points moved off the symmetric square by 1–3 cm (thesis Sec. VI-C)
+OFF_SQUARE = np.array([[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]])
+
+
+def smooth_setpoints(duration: float, sx: float, sw: float, dt: float = 0.01) -> Setpoints:
+    """A smooth, rest-to-rest run: sinusoids under a C² smoothstep envelope.
+
+    ``sx`` = ±1 negates the translations, ``sw`` = ±1 mirrors (the four variants of Sec. VI-A).
+    """
+    t = np.arange(0.0, duration + dt / 2, dt)
+
+    def smoothstep(u: np.ndarray) -> np.ndarray:
+        u = np.clip(u, 0.0, 1.0)
+        return u**3 * (10 - 15 * u + 6 * u**2)
+
+    end = duration - 0.5
+    env = smoothstep(t / 1.5) * smoothstep((end - t) / 1.5)
+    vx = sx * env * (0.6 + 0.4 * np.sin(2 * np.pi * t / 6))
+    vy = sx * sw * 0.3 * np.sin(2 * np.pi * t / 8) * env
+    om = sw * 0.8 * np.sin(2 * np.pi * t / 5) * env
+    return Setpoints(t, vx, vy, om)
+
+
+def four_variants(duration: float) -> list[Setpoints]:
+    return [smooth_setpoints(duration, sx, sw) for sx, sw in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+
+
+@pytest.fixture(scope="session")
+def off_square() -> Platform:
+    return ropod_platform().with_pivots(OFF_SQUARE)
+
+
+@pytest.fixture(scope="session")
+def truth(off_square: Platform):
+    return thesis_fixed_masses(off_square.unit_names)
+
+
+@pytest.fixture(scope="session")
+def runs_off_square(off_square: Platform, truth) -> list[SimResult]:
+    """Four exact 8 s variants on the off-square platform (200 Hz logs)."""
+    return simulate(off_square, truth, four_variants(8.0), rate=200.0)
+
+
+@pytest.fixture(scope="session")
+def runs_off_square_noisy(off_square: Platform, runs_off_square: list[SimResult]):
+    """The same runs recorded with 2¹⁴-count encoders and 30 mA current noise."""
+    from ropod_sysid.simulate import Sensors
+
+    rng = np.random.default_rng(7)
+    sensors = Sensors(encoder_counts=2**14, current_noise=0.03)
+    return [record(off_square, r, r.log.t, sensors, rng, f"noisy{k}")
+            for k, r in enumerate(runs_off_square)]
+
+
+@pytest.fixture(scope="session")
+def runs_square() -> list[SimResult]:
+    """Four exact 6 s variants on the symmetric ropod (structurally rank deficient)."""
+    pf = ropod_platform()
+    return simulate(pf, thesis_fixed_masses(pf.unit_names), four_variants(6.0), rate=200.0)
