@@ -62,7 +62,7 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
                       rcond=rcond)
 
 
-@click.command("fit")
+@click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @platform_option
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),

@@ -15,7 +15,7 @@ from ropod_sysid.platform import load_platform
 from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, Setpoints, simulate
 
 
-@click.command("simulate")
+@click.command("simulate", short_help="Simulate a run with known parameters; write its log.")
 @platform_option
 @click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
               help="True parameters: a parameter file or a flat name: value mapping.")

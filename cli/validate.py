@@ -16,7 +16,7 @@ from ropod_sysid.summary import format_validation
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
 
 
-@click.command("validate")
+@click.command("validate", short_help="Check a fitted model on logs it was not fitted on.")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @platform_option
 @click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),

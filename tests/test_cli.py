@@ -1,0 +1,205 @@
+"""The command line: one-line errors with exit status 2 and no partial output, formats."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from ropod_sysid.cli.main import main
+from ropod_sysid.io import write_log
+from ropod_sysid.io.paramfile import read_parameter_file
+from ropod_sysid.platform import save_platform
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, off_square, truth, runs_off_square):
+    d = tmp_path_factory.mktemp("cli")
+    save_platform(off_square, d / "platform.yaml")
+    (d / "truth.json").write_text(json.dumps(truth.to_mapping(off_square.unit_names)))
+    logs = []
+    for k, r in enumerate(runs_off_square):
+        p = d / f"run{k}.csv"
+        write_log(r.log, p)
+        logs.append(p)
+    return d, logs
+
+
+def run(*args: str):
+    return CliRunner().invoke(main, list(args))
+
+
+def one_line_error(result, *fragments: str) -> None:
+    assert result.exit_code == 2, result.output
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert len(lines) == 1, result.output
+    assert lines[0].startswith("error: ")
+    assert "Traceback" not in result.output
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+
+
+def test_help_lists_every_command_and_version():
+    r = run("--help")
+    assert r.exit_code == 0
+    for name in ("simulate", "fit", "validate", "report", "trajectory", "convert", "inspect"):
+        assert name in r.output
+    r = run("--version")
+    assert r.exit_code == 0 and "0.1.0" in r.output
+
+
+def test_fit_writes_each_format(files):
+    d, logs = files
+    for fmt in ("json", "yaml", "ros2"):
+        out = d / f"p.{fmt}"
+        r = run("fit", *map(str, logs), "--platform", str(d / "platform.yaml"), "--out",
+                str(out), "--format", fmt, "--quiet")
+        assert r.exit_code == 0, r.output
+        pf = read_parameter_file(out)
+        assert pf.rank == 29 and pf.samples > 6000
+        assert pf.values()["m_b"] == pytest.approx(35.1, rel=0.02)
+    data = json.loads((d / "p.json").read_text())
+    assert list(data)[:6] == ["platform", "parameters", "rms", "condition_number", "rank",
+                              "samples"]
+    assert set(data["rms"]) == {"translation", "rotation"}
+    ros = yaml.safe_load((d / "p.ros2").read_text())
+    node = next(iter(ros.values()))["ros__parameters"]
+    assert node["base_kin_model"]["d_w"] == 0.08 and "m_b" in node["dyn_model"]
+    out = d / "p.kelo"
+    r = run("fit", str(logs[0]), "--platform", str(d / "platform.yaml"), "--out", str(out),
+            "--format", "kelo", "--quiet")
+    assert r.exit_code == 0, r.output
+    kelo = yaml.safe_load(out.read_text())
+    assert kelo["wheel_diameter"] == pytest.approx(0.105) and "wheel0" in kelo
+
+
+def test_fit_summary_and_options(files):
+    d, logs = files
+    r = run("fit", *map(str, logs), "--platform", str(d / "platform.yaml"), "--out",
+            str(d / "s.json"), "--span", "0.15s", "--fix", "m_b=35.1", "--weight-rotation",
+            "none", "--friction", "shared")
+    assert r.exit_code == 0, r.output
+    for text in ("m_b", "fixed", "RMS residual: translation", "rank 8 of 8",
+                 "condition number", "rotation weight 1"):
+        assert text in r.output
+    extras = json.loads((d / "s.json").read_text())
+    assert extras["fixed"] == {"m_b": 35.1} and extras["span"] == "0.15s"
+
+
+def test_validate_reports_residual_and_observer(files):
+    d, logs = files
+    params = d / "v.json"
+    assert run("fit", *map(str, logs[:3]), "--platform", str(d / "platform.yaml"), "--out",
+               str(params), "--quiet").exit_code == 0
+    r = run("validate", str(logs[3]), "--platform", str(d / "platform.yaml"), "--params",
+            str(params), "--json")
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.output)
+    (v,) = out["logs"]
+    assert v["rms"]["translation"] < 2.0 and v["rms"]["rotation"] < 0.5
+    assert v["share_above_threshold"] == {"force": 0.0, "torque": 0.0}
+    assert out["thresholds"] == {"force_N": 40.0, "torque_Nm": 10.0}
+    r = run("validate", str(logs[3]), "--platform", str(d / "platform.yaml"), "--params",
+            str(params))
+    assert r.exit_code == 0 and "run3.csv" in r.output
+
+
+def test_simulate_writes_a_valid_log(tmp_path, files):
+    d, _ = files
+    traj = tmp_path / "traj.csv"
+    t = np.arange(0, 1.5, 0.01)
+    v = 0.3 * np.sin(np.pi * t / 1.5) ** 2
+    np.savetxt(traj, np.column_stack([t, v, 0 * t, 0.5 * v]), delimiter=",",
+               header="t,vx,vy,omega", comments="")
+    out = tmp_path / "run.csv"
+    r = run("simulate", "--platform", str(d / "platform.yaml"), "--params",
+            str(d / "truth.json"), "--trajectory", str(traj), "--out", str(out),
+            "--encoder-counts", "16384", "--current-noise", "0.03", "--jitter", "0.0005",
+            "--quiet")
+    assert r.exit_code == 0, r.output
+    from ropod_sysid.io import read_log
+    from ropod_sysid.platform import load_platform
+
+    log = read_log(out, load_platform(d / "platform.yaml"))
+    assert log.n_samples == 299 and np.all(np.diff(log.t) > 0)
+    step = 2 * np.pi / 16384
+    np.testing.assert_allclose(log.phi / step, np.round(log.phi / step), atol=1e-6)
+    assert log.phi[-1].mean() > 0.5  # it drove forward
+
+
+BAD_CASES = {
+    "empty": ("", "empty"),
+    "header only": ("{header}\n", "no data rows"),
+    "missing column": ("{header_missing}\n{row}\n{row2}\n{row3}\n", "'cur_4R'"),
+    "duplicated column": ("{header_dup}\n{row_dup}\n", "appears twice"),
+    "text in a number": ("{header}\n{row}\n{row_text}\n{row3}\n", "line 3"),
+    "NaN": ("{header}\n{row}\n{row_nan}\n{row3}\n", "line 3"),
+    "infinity": ("{header}\n{row}\n{row_inf}\n{row3}\n", "line 3"),
+    "non-increasing time": ("{header}\n{row}\n{row}\n{row3}\n", "strictly increase"),
+    "truncated last line": ("{header}\n{row}\n{row2}\n{row_cut}", "line 4"),
+    "unit names": ("{header_units}\n{row}\n{row2}\n{row3}\n", "expects units"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CASES))
+def test_bad_log_gives_one_line_and_no_output(tmp_path, files, case):
+    d, _ = files
+    units = ["1", "2", "3", "4"]
+    cols = ["t"] + [f"{p}_{u}{w}" for u in units for p, w in
+                    (("delta", ""), ("phi", "L"), ("phi", "R"), ("cur", "L"), ("cur", "R"))]
+    header = ",".join(cols)
+
+    def row(t: float) -> str:
+        return ",".join([str(t)] + ["0.1"] * (len(cols) - 1))
+
+    fill = {
+        "header": header,
+        "header_missing": ",".join(cols[:-1]),
+        "header_dup": header + ",t",
+        "row_dup": row(0.0) + ",0",
+        "header_units": header.replace("_1", "_A"),
+        "row": row(0.0), "row2": row(0.005), "row3": row(0.01),
+        "row_text": row(0.005).replace("0.1", "abc", 1),
+        "row_nan": row(0.005).replace("0.1", "nan", 1),
+        "row_inf": row(0.005).replace("0.1", "inf", 1),
+        "row_cut": row(0.01)[: len(row(0.01)) // 2],
+    }
+    text, fragment = BAD_CASES[case]
+    log = tmp_path / "bad.csv"
+    log.write_text(text.format(**fill))
+    out = tmp_path / "out.json"
+    r = run("fit", str(log), "--platform", str(d / "platform.yaml"), "--out", str(out))
+    one_line_error(r, "bad.csv", fragment)
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [log]
+
+
+def test_other_bad_inputs(tmp_path, files, runs_off_square):
+    d, logs = files
+    out = tmp_path / "out.json"
+    pf = str(d / "platform.yaml")
+    one_line_error(run("fit", str(tmp_path / "nope.csv"), "--platform", pf, "--out", str(out)),
+                   "nope.csv")
+    one_line_error(run("fit", str(logs[0]), "--platform", pf, "--out", str(out), "--span",
+                       "5s"), "too few for a smoother span")
+    one_line_error(run("fit", str(logs[0]), "--platform", pf, "--out", str(out), "--fix",
+                       "m_b"), "--fix 'm_b'")
+    one_line_error(run("fit", str(logs[0]), "--platform", pf, "--out", str(out),
+                       "--weight-rotation", "heavy"), "--weight-rotation")
+    # a log where nothing moves: the regressor has rank 0
+    import dataclasses
+
+    log = runs_off_square[0].log
+    still = dataclasses.replace(log, delta=0 * log.delta, phi=0 * log.phi,
+                                current=0 * log.current)
+    write_log(still, tmp_path / "still.csv")
+    one_line_error(run("fit", str(tmp_path / "still.csv"), "--platform", pf, "--out",
+                       str(out)), "rank 0")
+    bad_pf = tmp_path / "bad.yaml"
+    bad_pf.write_text("wheel_radius: -1\n")
+    one_line_error(run("fit", str(logs[0]), "--platform", str(bad_pf), "--out", str(out)),
+                   "bad.yaml")
+    assert not out.exists()
