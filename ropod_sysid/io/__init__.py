@@ -8,14 +8,22 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.platform import Platform
 
-LOG_SUFFIXES = (".csv", ".mcap")
+LOG_SUFFIXES = (".csv", ".csv.gz", ".mcap")
 
 
 def read_log(path: str | Path, platform: Platform) -> Log:
-    """Read a log in any supported format, chosen by the file suffix (.csv, .mcap)."""
+    """Read a log in any supported format, chosen by the file suffix (.csv, .mcap).
+
+    A CSV whose header names ``sensors.0.`` columns is read in the smart-wheel layout
+    (:mod:`ropod_sysid.io.smartwheel`); an MCAP file's layout is recognised from its channels.
+    """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".csv":
+        from ropod_sysid.io.smartwheel import is_smartwheel_csv, read_smartwheel_csv
+
+        if is_smartwheel_csv(path):
+            return read_smartwheel_csv(path, platform)
         from ropod_sysid.io.csvlog import read_csv_log
 
         return read_csv_log(path, platform)

@@ -1,0 +1,582 @@
+"""MCAP logs: the contract channels in an MCAP file, written and read back bit for bit.
+
+Our layout is one message per control cycle holding every unit, on topic ``/ropod/sysid``:
+
+``json`` (schema ``ropod_sysid/LogSample``, encoding ``jsonschema``, so any MCAP viewer shows it)::
+
+    {"t": 0.005,
+     "units": {"1": {"delta": 0.1, "phi_L": 2.5, "phi_R": 2.4, "cur_L": 0.3, "cur_R": -0.1}, ...},
+     "pose": {"x_b": 0.0, "y_b": 0.0, "theta_b": 0.0}}          # only when the log has a pose
+
+``ros2`` (schema ``ropod_sysid_msgs/msg/LogSample``, encoding ``ros2msg``, messages CDR): see
+:data:`CONTRACT_MSGDEF` — ``float64 t`` and one ``float64[]`` per channel, in ``units`` order.
+
+Floats are written exactly (JSON numbers in Python's shortest round-trip form, CDR float64), so
+CSV → MCAP → CSV gives the identical file. Chunks are small (64 KiB before compression) so that
+a damaged or truncated file loses little.
+
+Reading (:func:`read_mcap_log`) iterates the records in file order without seeking, so files
+without index or summary (a recording that was cut off) read too. It recognises our layout (JSON or
+ROS 2) and the smart-wheel layout (:mod:`ropod_sysid.io.smartwheel`) by schema and topic names.
+Damage — truncation, a CRC mismatch, a broken compressed chunk, an unreadable record or message —
+stops reading there: what came before is kept with a warning (``warnings.warn`` and
+``Log.notes``) that says how many messages were recovered, or, when too little is left, the file is
+refused with a one-line :class:`InputError`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import warnings
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.log import Log
+from ropod_sysid.platform import Platform
+
+try:  # the compressors mcap uses; their errors mean a broken chunk
+    from zstandard import ZstdError
+except ImportError:  # pragma: no cover - zstandard comes with mcap
+    class ZstdError(Exception):  # type: ignore[no-redef]
+        pass
+
+CONTRACT_TOPIC = "/ropod/sysid"
+CONTRACT_JSON_SCHEMA = "ropod_sysid/LogSample"
+CONTRACT_ROS2_SCHEMA = "ropod_sysid_msgs/msg/LogSample"
+ENCODINGS = ("json", "ros2")
+CHUNK_SIZE = 64 * 1024
+MIN_SAMPLES = 3
+UNIT_FIELDS = ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
+POSE_FIELDS = ("x_b", "y_b", "theta_b")
+_MAX_CHUNK = 1 << 30   # a larger uncompressed chunk size is taken for damage
+_LIBRARY = "ropod-sysid"
+
+CONTRACT_MSGDEF = """\
+# One control cycle of a ropod-sysid log: the data-contract channels of every unit (SI units).
+float64 t          # time [s]
+string[] units     # unit names, platform-file order; the arrays below follow it
+float64[] delta    # pivot angle per unit [rad]
+float64[] phi_l    # left wheel angle per unit [rad], unwrapped, rolling forward positive
+float64[] phi_r    # right wheel angle per unit [rad]
+float64[] cur_l    # left motor current per unit [A]
+float64[] cur_r    # right motor current per unit [A]
+float64[] pose     # x_b [m], y_b [m], theta_b [rad] from an external tracker, or empty
+"""
+
+# Everything the mcap reader and the decompressors raise on a damaged file, and what parsing
+# garbage as records can raise. Caught only around the calls that read the file.
+READ_ERRORS: tuple[type[BaseException], ...] = (
+    McapError, ValueError, struct.error, EOFError, LookupError, TypeError, AttributeError,
+    ArithmeticError, MemoryError, RuntimeError, OSError, ZstdError,
+)
+
+
+# ---------------------------------------------------------------------------------------------
+# writing
+
+
+def write_mcap_log(log: Log, path: str | Path, encoding: str = "json",
+                   topic: str = CONTRACT_TOPIC) -> None:
+    """Write ``log`` as an MCAP file in our layout (``encoding`` json or ros2), atomically."""
+    if encoding not in ENCODINGS:
+        raise InputError(f"{path}: unknown MCAP encoding {encoding!r}; use json or ros2")
+    log_times = _log_times(log.t)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        if encoding == "json":
+            _write_contract_json(log, f, topic, log_times)
+        else:
+            _write_contract_ros2(log, f, topic, log_times)
+
+
+def _log_times(t: np.ndarray) -> list[int]:
+    """Message log times [ns] from the sample times, relative to the first sample (≥ 0)."""
+    t = np.asarray(t, dtype=np.float64)
+    if t.size == 0:
+        return []
+    ns = np.round((t - t[0]) * 1e9)
+    return np.clip(ns, 0, 2.0**63 - 1).astype(np.int64).tolist()
+
+
+def new_writer(f: IO[bytes], profile: str = "") -> McapWriter:
+    """An MCAP writer with our chunking (small chunks, zstd, chunk and data-section CRCs),
+    started."""
+    writer = McapWriter(f, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD,
+                        enable_crcs=True, enable_data_crcs=True)
+    writer.start(profile=profile, library=_LIBRARY)
+    return writer
+
+
+def contract_json_schema(units: list[str], pose: bool) -> dict[str, Any]:
+    """The JSON schema of one message of our layout (for viewers)."""
+    num = {"type": "number"}
+    unit = {
+        "type": "object",
+        "properties": {
+            "delta": {**num, "description": "pivot angle [rad]"},
+            "phi_L": {**num, "description": "left wheel angle [rad], unwrapped"},
+            "phi_R": {**num, "description": "right wheel angle [rad], unwrapped"},
+            "cur_L": {**num, "description": "left motor current [A]"},
+            "cur_R": {**num, "description": "right motor current [A]"},
+        },
+        "required": list(UNIT_FIELDS),
+    }
+    schema: dict[str, Any] = {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": CONTRACT_JSON_SCHEMA,
+        "description": "One control cycle of a ropod-sysid log (data contract, SI units).",
+        "type": "object",
+        "properties": {
+            "t": {**num, "description": "time [s]"},
+            "units": {"type": "object", "properties": {u: unit for u in units},
+                      "required": list(units)},
+        },
+        "required": ["t", "units"],
+    }
+    if pose:
+        schema["properties"]["pose"] = {
+            "type": "object",
+            "description": "base pose from an external tracker [m, m, rad]",
+            "properties": {k: num for k in POSE_FIELDS},
+            "required": list(POSE_FIELDS),
+        }
+        schema["required"].append("pose")
+    return schema
+
+
+def _write_contract_json(log: Log, f: IO[bytes], topic: str, log_times: list[int]) -> None:
+    writer = new_writer(f)
+    units = list(log.units)
+    schema_id = writer.register_schema(
+        CONTRACT_JSON_SCHEMA, "jsonschema",
+        json.dumps(contract_json_schema(units, log.pose is not None)).encode())
+    channel_id = writer.register_channel(topic, "json", schema_id,
+                                         {"layout": "ropod_sysid/contract"})
+    t = np.asarray(log.t, dtype=np.float64).tolist()
+    per_unit = np.stack([log.delta, log.phi[..., 0], log.phi[..., 1], log.current[..., 0],
+                         log.current[..., 1]], axis=-1).astype(np.float64).tolist()  # N, n, 5
+    pose = None if log.pose is None else np.asarray(log.pose, dtype=np.float64).tolist()
+    dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=True).encode
+    for k, tk in enumerate(t):
+        msg: dict[str, Any] = {"t": tk, "units": {
+            u: dict(zip(UNIT_FIELDS, vals, strict=True))
+            for u, vals in zip(units, per_unit[k], strict=True)}}
+        if pose is not None:
+            msg["pose"] = dict(zip(POSE_FIELDS, pose[k], strict=True))
+        writer.add_message(channel_id, log_times[k], dumps(msg).encode(), log_times[k], k)
+    writer.finish()
+
+
+def _write_contract_ros2(log: Log, f: IO[bytes], topic: str, log_times: list[int]) -> None:
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    writer = new_writer(f, profile="ros2")
+    encode = serialize_dynamic(CONTRACT_ROS2_SCHEMA, CONTRACT_MSGDEF)[CONTRACT_ROS2_SCHEMA]
+    schema_id = writer.register_schema(CONTRACT_ROS2_SCHEMA, "ros2msg", CONTRACT_MSGDEF.encode())
+    channel_id = writer.register_channel(topic, "cdr", schema_id,
+                                         {"layout": "ropod_sysid/contract"})
+    units = list(log.units)
+    t = np.asarray(log.t, dtype=np.float64).tolist()
+    cols = [np.asarray(a, dtype=np.float64).tolist() for a in
+            (log.delta, log.phi[..., 0], log.phi[..., 1], log.current[..., 0],
+             log.current[..., 1])]
+    pose = None if log.pose is None else np.asarray(log.pose, dtype=np.float64).tolist()
+    for k, tk in enumerate(t):
+        msg = {"t": tk, "units": units, "delta": cols[0][k], "phi_l": cols[1][k],
+               "phi_r": cols[2][k], "cur_l": cols[3][k], "cur_r": cols[4][k],
+               "pose": [] if pose is None else pose[k]}
+        writer.add_message(channel_id, log_times[k], encode(msg), log_times[k], k)
+    writer.finish()
+
+
+# ---------------------------------------------------------------------------------------------
+# reading: records in file order, stopping at damage
+
+
+@dataclass
+class McapScan:
+    """What a pass over an MCAP file found, up to the first damage."""
+
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    messages: dict[int, list[Message]] = field(default_factory=dict)   # channel id → messages
+    damage: str | None = None          # what stopped reading, None for an intact file
+    complete: bool = False             # the whole data section was read (damage, if any, is
+                                       # in the summary, the footer or outside the chunks)
+    size: int = 0
+
+    @property
+    def n_messages(self) -> int:
+        return sum(len(m) for m in self.messages.values())
+
+
+class _Bounded:
+    """A file that never reads past its end, whatever length a damaged record asks for."""
+
+    def __init__(self, f: IO[bytes], size: int) -> None:
+        self._f, self.size, self.pos = f, size, 0
+
+    def read(self, n: int = -1) -> bytes:
+        n = self.size - self.pos if n is None or n < 0 else min(n, self.size - self.pos)
+        data = self._f.read(n) if n > 0 else b""
+        self.pos += len(data)
+        return data
+
+
+def _open_binary(path: Path, where: str) -> IO[bytes]:
+    try:
+        return open(path, "rb")  # noqa: SIM115
+    except FileNotFoundError:
+        raise InputError(f"{where}: no such log file; check the path") from None
+    except IsADirectoryError:
+        raise InputError(f"{where}: is a directory, not an MCAP log file; give the file") \
+            from None
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") from None
+
+
+def scan_mcap(path: str | Path) -> McapScan:
+    """All schemas, channels and messages of an MCAP file in file order, up to any damage.
+
+    Raises :class:`InputError` only when the file is not MCAP at all (missing, empty, wrong
+    magic, unreadable first record); damage further on is reported in :attr:`McapScan.damage`.
+    """
+    where = str(path)
+    path = Path(path)
+    scan = McapScan()
+    with _open_binary(path, where) as f:
+        try:
+            scan.size = os.fstat(f.fileno()).st_size
+        except OSError:
+            scan.size = 0
+        if scan.size == 0:
+            raise InputError(f"{where}: the file is empty; an MCAP log was expected")
+        src = _Bounded(f, scan.size)
+        reader = StreamReader(src, emit_chunks=True, validate_crcs=True,  # type: ignore[arg-type]
+                              record_size_limit=scan.size)
+        records = reader.records
+        good_end = 0        # end of the last record read intact
+        first = True
+        footer: Footer | None = None
+        while True:
+            try:
+                record = next(records)   # after the footer: checks the closing magic bytes
+                inner = _chunk_records(record) if isinstance(record, Chunk) else [record]
+            except StopIteration:
+                if footer is None and scan.damage is None:
+                    scan.damage = (f"the file ends after byte {good_end} without a footer — "
+                                   "truncated")
+                break
+            except InvalidMagic:
+                if first:
+                    raise InputError(
+                        f"{where}: not an MCAP file (it does not start with the MCAP magic "
+                        "bytes); give a .mcap log, or a .csv file for a CSV log") from None
+                scan.damage = "bad magic bytes at the end of the file"
+                break
+            except READ_ERRORS as exc:
+                what = _what(exc, good_end, src.pos >= scan.size, src.pos == good_end)
+                if first:
+                    raise InputError(f"{where}: not a readable MCAP file ({what})") from None
+                scan.damage = what
+                if isinstance(exc, CRCValidationError) and isinstance(exc.record, DataEnd):
+                    scan.complete = True    # every message was read; the damage is elsewhere
+                break
+            first = False
+            for r in inner:
+                _take(scan, r)
+                if isinstance(r, DataEnd):
+                    scan.complete = True
+                elif isinstance(r, Footer):
+                    footer = r
+                    if not _summary_crc_ok(f, r, good_end):
+                        scan.damage = "CRC mismatch of the summary section"
+            good_end = src.pos
+    return scan
+
+
+def _summary_crc_ok(f: IO[bytes], footer: Footer, footer_start: int) -> bool:
+    """Check the footer's summary CRC (the stream reader does not): it covers the summary
+    section and the footer up to the CRC field. True when there is nothing to check."""
+    if footer.summary_crc == 0 or footer.summary_start == 0:
+        return True
+    end = footer_start + 1 + 8 + 8 + 8       # opcode, length, summary_start, offset_start
+    if not 0 < footer.summary_start <= footer_start:
+        return False
+    try:
+        here = f.tell()
+        f.seek(footer.summary_start)
+        data = f.read(end - footer.summary_start)
+        f.seek(here)
+    except (OSError, ValueError):
+        return True     # not seekable: nothing to check
+    return zlib.crc32(data) == footer.summary_crc
+
+
+def _chunk_records(chunk: Chunk) -> list[Any]:
+    if chunk.uncompressed_size > _MAX_CHUNK:
+        raise ValueError(f"implausible chunk size {chunk.uncompressed_size}")
+    return breakup_chunk(chunk, validate_crc=True)
+
+
+def _take(scan: McapScan, record: Any) -> None:
+    if isinstance(record, Schema):
+        scan.schemas[record.id] = record
+    elif isinstance(record, Channel):
+        scan.channels[record.id] = record
+    elif isinstance(record, Message):
+        scan.messages.setdefault(record.channel_id, []).append(record)
+
+
+def _what(exc: BaseException, good_end: int, at_eof: bool, boundary: bool) -> str:
+    """What went wrong after byte ``good_end``, in words."""
+    if (at_eof or isinstance(exc, EndOfFile)) and boundary:
+        return f"the file ends after byte {good_end}, before its end records — truncated"
+    if at_eof or isinstance(exc, EndOfFile):
+        return f"the file ends in the middle of a record after byte {good_end} — truncated"
+    if isinstance(exc, CRCValidationError):
+        kind = type(exc.record).__name__
+        return (f"CRC mismatch of the compressed chunk after byte {good_end}" if kind == "Chunk"
+                else "CRC mismatch of the data section, outside the CRC-checked chunks")
+    if isinstance(exc, ZstdError | RuntimeError):
+        return f"broken compressed chunk after byte {good_end} ({type(exc).__name__})"
+    text = " ".join(str(exc).split())[:80]
+    return f"unreadable record after byte {good_end} ({type(exc).__name__}" \
+           f"{': ' + text if text else ''})"
+
+
+# ---------------------------------------------------------------------------------------------
+# reading: layouts
+
+
+@dataclass
+class Stream:
+    """The messages of the channel holding the log, and how to decode them."""
+
+    layout: str          # "contract" or "smartwheel"
+    encoding: str        # "json" or "ros2"
+    channel: Channel
+    schema: Schema | None
+    messages: list[Message]
+
+
+def layout_of(channel: Channel, schema: Schema | None) -> tuple[str, str] | None:
+    """(layout, encoding) of a channel when it is one we read, else None."""
+    from ropod_sysid.io.smartwheel import SW_TOPIC, is_smartwheel_schema
+
+    name = schema.name if schema is not None else ""
+    enc = channel.message_encoding
+    encoding = "json" if enc == "json" else "ros2" if enc == "cdr" else None
+    if encoding is None:
+        return None
+    if name in (CONTRACT_JSON_SCHEMA, CONTRACT_ROS2_SCHEMA, "ropod_sysid_msgs/LogSample"):
+        return "contract", encoding
+    if is_smartwheel_schema(name) or channel.topic == SW_TOPIC:
+        return "smartwheel", encoding
+    if channel.topic == CONTRACT_TOPIC:
+        return "contract", encoding
+    return None
+
+
+def pick_stream(scan: McapScan, where: str) -> Stream:
+    """The channel that holds the log (ours, else the smart-wheel data), or a one-line error."""
+    found = []
+    for cid, channel in scan.channels.items():
+        schema = scan.schemas.get(channel.schema_id)
+        lay = layout_of(channel, schema)
+        if lay is not None:
+            found.append(Stream(lay[0], lay[1], channel, schema, scan.messages.get(cid, [])))
+    if not found:
+        if not scan.channels:
+            raise _no_data(scan, where, "no channels")
+        listed = ", ".join(
+            f"{c.topic} ({scan.schemas[c.schema_id].name if c.schema_id in scan.schemas else 'no schema'}, {c.message_encoding})"  # noqa: E501
+            for c in list(scan.channels.values())[:5])
+        raise InputError(
+            f"{where}: no ropod-sysid log or smart-wheel data in this MCAP file (channels: "
+            f"{listed}); expected topic {CONTRACT_TOPIC} or /sw_ethercat_parser/data")
+    found.sort(key=lambda s: (s.layout != "contract", -len(s.messages)))
+    return found[0]
+
+
+def _no_data(scan: McapScan, where: str, what: str) -> InputError:
+    if scan.damage:
+        return InputError(f"{where}: damaged MCAP file ({scan.damage}); no messages could be "
+                          "recovered")
+    return InputError(f"{where}: the MCAP file has {what}; no log messages to read")
+
+
+def read_mcap_log(path: str | Path, platform: Platform) -> Log:
+    """Read an MCAP log (our layout, JSON or ROS 2, or the smart-wheel layout) for ``platform``.
+
+    Damage stops reading: the messages before it are kept with a warning (``warnings.warn`` and
+    ``Log.notes``) saying how many were recovered; with fewer than 3 recovered, or when the file
+    is no MCAP at all, :class:`InputError` (one line) is raised.
+    """
+    where = str(path)
+    scan = scan_mcap(path)
+    stream = pick_stream(scan, where)
+    decode = _decoder(stream, where)
+    decoded: list[Any] = []
+    damage = scan.damage
+    for k, msg in enumerate(stream.messages):
+        try:
+            decoded.append(decode(msg.data))
+        except READ_ERRORS as exc:
+            what = " ".join(str(exc).split())[:60]
+            damage = (f"message {k} on {stream.channel.topic} cannot be decoded "
+                      f"({type(exc).__name__}{': ' + what if what else ''})")
+            break
+    n = len(decoded)
+    if n == 0:
+        if damage:
+            raise InputError(f"{where}: damaged MCAP file ({damage}); no messages could be "
+                             "recovered")
+        raise InputError(f"{where}: no messages on {stream.channel.topic}; the log is empty")
+    if damage and n < MIN_SAMPLES:
+        raise InputError(f"{where}: damaged MCAP file ({damage}); only {n} message"
+                         f"{'s' if n != 1 else ''} could be recovered, at least {MIN_SAMPLES} "
+                         "samples are needed")
+    if stream.layout == "smartwheel":
+        from ropod_sysid.io.smartwheel import frames_from_messages, frames_to_log
+
+        frames = frames_from_messages(decoded, platform, where, stream.encoding)
+        log = frames_to_log(frames, platform, where, warn=False)
+    else:
+        log = _contract_log(decoded, stream.encoding, platform, where, damage is not None)
+    if damage:
+        total = f" of {len(stream.messages)}" if len(stream.messages) > n else ""
+        if scan.complete and damage is scan.damage:
+            note = (f"{where}: damaged MCAP file ({damage}); all {n} messages were recovered "
+                    "(the damage is not in them)")
+        else:
+            note = (f"{where}: damaged MCAP file ({damage}); recovered the {n}{total} message"
+                    f"{'s' if n != 1 else ''} before the damage — the log may end early")
+        log.notes.insert(0, note)
+    for note in log.notes:
+        warnings.warn(note, stacklevel=2)
+    return log
+
+
+def _decoder(stream: Stream, where: str) -> Any:
+    if stream.encoding == "json":
+        return json.loads
+    schema = stream.schema
+    if schema is None or schema.encoding != "ros2msg":
+        raise InputError(f"{where}: channel {stream.channel.topic} is CDR-encoded but has no "
+                         "ros2msg schema; it cannot be decoded")
+    from mcap_ros2._dynamic import generate_dynamic
+
+    try:
+        types = generate_dynamic(schema.name, schema.data.decode())
+        return types[schema.name]
+    except READ_ERRORS + (SyntaxError,) as exc:
+        raise InputError(f"{where}: the ros2msg schema {schema.name!r} of "
+                         f"{stream.channel.topic} cannot be parsed ({type(exc).__name__})") \
+            from None
+
+
+def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: str,
+                  damaged: bool) -> Log:
+    units = platform.unit_names
+    n_units = len(units)
+    n = len(decoded)
+    t = np.empty(n)
+    vals = np.empty((n, n_units, 5))
+    pose: np.ndarray | None = None
+    if encoding == "json":
+        first = decoded[0]
+        if not isinstance(first, dict) or not isinstance(first.get("units"), dict):
+            raise InputError(f"{where}: message 0 is not a ropod-sysid log sample (expected "
+                             "keys 't' and 'units'); the file may use another layout")
+        _check_units(list(first["units"]), platform, where)
+        has_pose = isinstance(first.get("pose"), dict)
+        if has_pose:
+            pose = np.empty((n, 3))
+        for k, m in enumerate(decoded):
+            try:
+                t[k] = m["t"]
+                mu = m["units"]
+                for i, u in enumerate(units):
+                    e = mu[u]
+                    vals[k, i] = (e["delta"], e["phi_L"], e["phi_R"], e["cur_L"], e["cur_R"])
+                if pose is not None:
+                    p = m["pose"]
+                    pose[k] = (p["x_b"], p["y_b"], p["theta_b"])
+            except (KeyError, TypeError, ValueError) as exc:
+                raise InputError(f"{where}: message {k} lacks a log field ({_field(exc)}); "
+                                 "every message needs t and delta, phi_L, phi_R, cur_L, cur_R "
+                                 "of every unit") from None
+    else:
+        first_units = list(decoded[0].units)
+        _check_units(first_units, platform, where)
+        idx = [first_units.index(u) for u in units]
+        has_pose = len(decoded[0].pose) == 3
+        if has_pose:
+            pose = np.empty((n, 3))
+        for k, m in enumerate(decoded):
+            if list(m.units) != first_units:
+                raise InputError(f"{where}: message {k} lists units {list(m.units)} but "
+                                 f"message 0 lists {first_units}; the unit order must not "
+                                 "change within a log")
+            t[k] = m.t
+            try:
+                for j, arr in enumerate((m.delta, m.phi_l, m.phi_r, m.cur_l, m.cur_r)):
+                    vals[k, :, j] = [arr[i] for i in idx]
+                if pose is not None:
+                    pose[k] = m.pose
+            except (IndexError, ValueError) as exc:
+                raise InputError(f"{where}: message {k} has arrays shorter than its unit list "
+                                 f"({type(exc).__name__}); the message is malformed") from None
+    bad = ~np.isfinite(vals).all(axis=(1, 2)) | ~np.isfinite(t)
+    if pose is not None:
+        bad |= ~np.isfinite(pose).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise InputError(f"{where}: message {k} has a NaN or infinite value; the log must be "
+                         "finite — repair or cut the recording")
+    if n < MIN_SAMPLES:
+        raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
+                         f"{MIN_SAMPLES} samples are needed — use a longer log")
+    steps = np.diff(t)
+    nonincr = np.flatnonzero(~(steps > 0))
+    if nonincr.size:
+        k = int(nonincr[0])
+        raise InputError(f"{where}: message {k + 1}: time t={float(t[k + 1])!r} is not after "
+                         f"t={float(t[k])!r} of message {k}; time must strictly increase")
+    return Log(t=t, units=list(units), delta=np.ascontiguousarray(vals[:, :, 0]),
+               phi=np.ascontiguousarray(vals[:, :, 1:3]),
+               current=np.ascontiguousarray(vals[:, :, 3:5]), pose=pose, source=where)
+
+
+def _field(exc: BaseException) -> str:
+    if isinstance(exc, KeyError):
+        return f"no {exc.args[0]!r}"
+    return type(exc).__name__
+
+
+def _check_units(log_units: list[str], platform: Platform, where: str) -> None:
+    absent = [u for u in platform.unit_names if u not in log_units]
+    if absent:
+        raise InputError(
+            f"{where}: the log has unit{'s' if len(log_units) != 1 else ''} "
+            f"{', '.join(log_units) or '(none)'} but the platform '{platform.name}' expects units "
+            f"{', '.join(platform.unit_names)}; use the platform file that matches the log")
+
+
+__all__ = [
+    "CONTRACT_MSGDEF", "CONTRACT_TOPIC", "ENCODINGS", "McapScan", "read_mcap_log", "scan_mcap",
+    "write_mcap_log",
+]
