@@ -1,0 +1,27 @@
+"""``ropod-sysid inspect``: timing, gaps, ranges of a log and whether it is enough to fit."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from ropod_sysid.cli.common import platform_option, reports_errors
+from ropod_sysid.inspect import format_inspection, inspect_file
+from ropod_sysid.platform import load_platform
+
+
+@click.command("inspect")
+@click.argument("log_path", metavar="LOG", type=click.Path(dir_okay=False))
+@platform_option
+@click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON.")
+@reports_errors
+def command(log_path: str, platform_path: str, as_json: bool) -> None:
+    """Inspect LOG (.csv or .mcap, any layout): units, duration, rate and jitter, gaps,
+    dropped frames, channel ranges, and whether it is long and varied enough to fit."""
+    platform = load_platform(platform_path)
+    ins = inspect_file(log_path, platform)
+    if as_json:
+        click.echo(json.dumps(ins.to_dict(), indent=2, allow_nan=False))
+    else:
+        click.echo(format_inspection(ins))

@@ -1,0 +1,211 @@
+"""Look at a log before fitting: timing, gaps, dropped frames, channel ranges, and whether the
+log is long and varied enough to identify the parameters.
+
+The verdict is a rule of thumb (thresholds in :class:`Criteria`): the fit needs motion — at least
+10 s of it — in every base degree of freedom (forward, sideways, turning; from wheel odometry, as
+the range between the 1st and 99th percentile of each base-frame velocity), and every pivot
+must turn through a good part of the circle (pivot friction and the hub inertia are seen only
+when the units swivel).
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+
+from ropod_sysid.io.log import Log
+from ropod_sysid.odometry import base_twist
+from ropod_sysid.platform import Platform
+
+_DROPPED = re.compile(r"dropped (\d+) of \d+ smart-wheel frames")
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """Thresholds of the 'enough to fit' verdict.
+
+    min_moving : seconds of motion [s]; moving means base speed above ``moving_speed`` [m/s] or
+    turn rate above ``moving_turn`` [rad/s]; min_vx, min_vy [m/s], min_omega [rad/s] : range of
+    each base velocity; min_pivot_coverage : degrees of the circle each pivot visits;
+    gap_factor : a sample interval longer than this many median intervals is a gap.
+    """
+
+    min_moving: float = 10.0
+    moving_speed: float = 0.02
+    moving_turn: float = 0.05
+    min_vx: float = 0.2
+    min_vy: float = 0.2
+    min_omega: float = 0.3
+    min_pivot_coverage: float = 90.0
+    gap_factor: float = 2.0
+
+
+@dataclass
+class Gap:
+    """A sample interval longer than ``gap_factor`` median intervals."""
+
+    index: int       # sample before the gap
+    t: float         # its time [s]
+    dt: float        # length of the interval [s]
+
+
+@dataclass
+class Inspection:
+    """What :func:`inspect_log` found. Times in s, rates in Hz, ranges as (min, max)."""
+
+    source: str
+    units: list[str]
+    samples: int
+    duration: float
+    rate: float                 # mean sample rate [Hz]
+    dt_median: float            # median sample interval [s]
+    jitter: float               # standard deviation of the sample interval [s]
+    gap_count: int
+    gaps: list[Gap]             # the first 20
+    dropped_frames: int
+    notes: list[str]
+    ranges: dict[str, tuple[float, float]]
+    velocity_ranges: dict[str, tuple[float, float]]   # vx, vy, omega: 1st and 99th percentile
+    moving_time: float
+    pivot_coverage: dict[str, float]                  # unit → degrees of the circle visited
+    enough_to_fit: bool
+    reasons: list[str] = field(default_factory=list)  # why not, when not
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready data."""
+        d = asdict(self)
+        d["ranges"] = {k: list(v) for k, v in self.ranges.items()}
+        d["velocity_ranges"] = {k: list(v) for k, v in self.velocity_ranges.items()}
+        return d
+
+
+def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) -> Inspection:
+    """Timing, gaps, ranges and the fit verdict of ``log`` (units as in ``platform``)."""
+    c = criteria or Criteria()
+    t = np.asarray(log.t, dtype=float)
+    n = t.size
+    dt = np.diff(t)
+    dt_med = float(np.median(dt)) if dt.size else 0.0
+    jitter = float(np.std(dt)) if dt.size else 0.0
+    duration = float(t[-1] - t[0]) if n else 0.0
+    rate = (n - 1) / duration if duration > 0 else 0.0
+    gap_idx = np.flatnonzero(dt > c.gap_factor * dt_med) if dt.size else np.zeros(0, int)
+    gaps = [Gap(int(k), float(t[k]), float(dt[k])) for k in gap_idx[:20]]
+    dropped = sum(int(m.group(1)) for note in log.notes for m in _DROPPED.finditer(note))
+    ranges = {k: (float(np.min(v)), float(np.max(v))) for k, v in log.columns().items()}
+
+    vel, moving_time = _base_velocity(log, platform, t, dt_med, c)
+    names = ("vx", "vy", "omega")
+    vel_ranges = {k: ((float(np.percentile(vel[:, j], 1)), float(np.percentile(vel[:, j], 99)))
+                      if vel.shape[0] else (0.0, 0.0)) for j, k in enumerate(names)}
+    coverage = {}
+    for i, u in enumerate(log.units):
+        wrapped = np.mod(log.delta[:, i], 2 * np.pi)
+        bins = np.unique(np.floor(wrapped / (2 * np.pi) * 36).astype(int))
+        coverage[u] = 10.0 * float(bins.size)
+
+    reasons = []
+    if moving_time < c.min_moving:
+        reasons.append(f"only {moving_time:.1f} s of motion; record at least {c.min_moving:g} s")
+    for key, need, unit in (("vx", c.min_vx, "m/s"), ("vy", c.min_vy, "m/s"),
+                            ("omega", c.min_omega, "rad/s")):
+        lo, hi = vel_ranges[key]
+        if hi - lo < need:
+            reasons.append(f"{key} spans only {hi - lo:.3g} {unit} (1st–99th percentile); "
+                           f"drive it through at least {need:g} {unit}")
+    low = [u for u, deg in coverage.items() if deg < c.min_pivot_coverage]
+    if low:
+        reasons.append(f"pivot{'s' if len(low) > 1 else ''} {', '.join(low)} turn through less "
+                       f"than {c.min_pivot_coverage:g}° (min "
+                       f"{min(coverage[u] for u in low):.0f}°); change the driving direction more")
+    notes_w = []
+    if gap_idx.size:
+        worst = int(gap_idx[np.argmax(dt[gap_idx])])
+        notes_w.append(f"{gap_idx.size} gap{'s' if gap_idx.size > 1 else ''} longer than "
+                       f"{c.gap_factor:g}× the median interval, the longest "
+                       f"{float(dt[worst]):.4g} s at t={float(t[worst]):.3f} s")
+    if dt_med > 0 and jitter > 0.1 * dt_med:
+        notes_w.append(f"sample interval jitter {jitter:.3g} s is over 10% of the median "
+                       f"{dt_med:.3g} s")
+    if dropped:
+        notes_w.append(f"{dropped} corrupt frame{'s' if dropped > 1 else ''} dropped on reading")
+    return Inspection(
+        source=log.source, units=list(log.units), samples=n, duration=duration, rate=rate,
+        dt_median=dt_med, jitter=jitter, gap_count=int(gap_idx.size), gaps=gaps,
+        dropped_frames=dropped, notes=list(log.notes), ranges=ranges,
+        velocity_ranges=vel_ranges, moving_time=moving_time, pivot_coverage=coverage,
+        enough_to_fit=not reasons, reasons=reasons, warnings=notes_w,
+    )
+
+
+def _base_velocity(log: Log, platform: Platform, t: np.ndarray, dt_med: float,
+                   c: Criteria) -> tuple[np.ndarray, float]:
+    """Base-frame twist (N, 3) from the encoders (rates smoothed over ~50 ms), and the time
+    spent moving [s]."""
+    if t.size < 3:
+        return np.zeros((0, 3)), 0.0
+    delta = np.unwrap(log.delta, axis=0)
+    d_rate = np.gradient(delta, t, axis=0)
+    p_rate = np.gradient(log.phi, t, axis=0)
+    w = max(1, int(round(0.05 / dt_med))) if dt_med > 0 else 1
+    if w > 1:
+        d_rate = uniform_filter1d(d_rate, w, axis=0, mode="nearest")
+        p_rate = uniform_filter1d(p_rate, w, axis=0, mode="nearest")
+    vel = base_twist(platform, delta, d_rate, p_rate)
+    moving = (np.hypot(vel[:, 0], vel[:, 1]) > c.moving_speed) | \
+        (np.abs(vel[:, 2]) > c.moving_turn)
+    widths = np.gradient(t)        # each sample's share of the time axis
+    return vel, float(np.sum(widths[moving]))
+
+
+def inspect_file(path: str | Path, platform: Platform,
+                 criteria: Criteria | None = None) -> Inspection:
+    """Read a log (any format and layout) and inspect it; reading warnings end up in notes."""
+    from ropod_sysid.io import read_log
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log = read_log(path, platform)
+    return inspect_log(log, platform, criteria)
+
+
+def format_inspection(ins: Inspection) -> str:
+    """The inspection as text for the terminal."""
+    lines = [
+        f"log        {ins.source}",
+        f"units      {', '.join(ins.units)}",
+        f"samples    {ins.samples} over {ins.duration:.3f} s",
+        f"rate       {ins.rate:.2f} Hz mean (median interval {1e3 * ins.dt_median:.3f} ms, "
+        f"jitter {1e3 * ins.jitter:.3f} ms std)",
+        f"gaps       {ins.gap_count}"
+        + ("" if not ins.gaps else "  (" + ", ".join(
+            f"{g.dt:.4g} s at t={g.t:.3f} s" for g in ins.gaps[:5])
+            + (", …" if ins.gap_count > 5 else "") + ")"),
+        f"dropped    {ins.dropped_frames} frame{'s' if ins.dropped_frames != 1 else ''}",
+        f"moving     {ins.moving_time:.1f} s",
+        "velocity   " + ", ".join(f"{k} [{lo:.3g}, {hi:.3g}]"
+                                  for k, (lo, hi) in ins.velocity_ranges.items())
+        + "  (1st–99th percentile, base frame)",
+        "pivots     " + ", ".join(f"{u}: {deg:.0f}°" for u, deg in ins.pivot_coverage.items())
+        + "  of the circle visited",
+        "ranges",
+    ]
+    width = max((len(k) for k in ins.ranges), default=0)
+    for k, (lo, hi) in ins.ranges.items():
+        lines.append(f"  {k:<{width}}  {lo:>12.6g}  {hi:>12.6g}")
+    for note in ins.notes:
+        lines.append(f"note       {note}")
+    for w in ins.warnings:
+        lines.append(f"warning    {w}")
+    if ins.enough_to_fit:
+        lines.append("verdict    enough to fit: long and varied enough")
+    else:
+        lines.append("verdict    not enough to fit: " + "; ".join(ins.reasons))
+    return "\n".join(lines)
