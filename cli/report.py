@@ -1,0 +1,57 @@
+"""``ropod-sysid report``: the HTML report of a parameter file on logs, without refitting."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.errors import InputError
+from ropod_sysid.io import read_log
+from ropod_sysid.io.paramfile import read_parameter_file
+from ropod_sysid.platform import load_platform
+from ropod_sysid.regressor import Span
+
+
+@click.command("report")
+@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@platform_option
+@click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
+              help="Parameter file of a fit (json, yaml or ros2).")
+@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+              help="HTML report to write (one self-contained file).")
+@click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
+              help="Another parameter file shown side by side (e.g. a fixed-masses fit or the "
+                   "truth of a simulation).")
+@click.option("--validate", "validate_paths", multiple=True, type=click.Path(dir_okay=False),
+              help="Validation log (repeatable): residuals and the disturbance observer.")
+@click.option("--span", default=None,
+              help="LOESS span: samples (21) or seconds (0.1s). Default: the parameter file's.")
+@quiet_option
+@reports_errors
+def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_path: str,
+            compare_path: str | None, validate_paths: tuple[str, ...], span: str | None,
+            quiet: bool) -> None:
+    """Write the HTML report of the parameters in --params on LOGS (the fit's logs).
+
+    No refit: the values and standard deviations are the file's; residuals, singular values,
+    rank and null space are computed on LOGS.
+    """
+    from ropod_sysid.report import result_from_parameter_file, write_fit_report
+
+    if Path(out_path).is_dir():
+        raise InputError(f"--out {out_path}: is a directory; give the report's file name, e.g. "
+                         "report.html")
+    platform = load_platform(platform_path)
+    pfile = read_parameter_file(params_path)
+    compare = read_parameter_file(compare_path) if compare_path is not None else None
+    sp = Span.parse(span) if span is not None else None
+    loaded = [read_log(p, platform) for p in logs]
+    validation = [read_log(p, platform) for p in validate_paths]
+    result, notes = result_from_parameter_file(platform, loaded, pfile, sp, where=params_path)
+    write_fit_report(result, loaded, out_path, compare=compare,
+                     compare_label=Path(compare_path).name if compare_path else None,
+                     validation_logs=validation, params_source=params_path, notes=notes)
+    if not quiet:
+        click.echo(f"wrote {out_path}", err=True)

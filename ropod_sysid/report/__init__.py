@@ -1,0 +1,455 @@
+"""The HTML fit report: one self-contained file an engineer opens in any browser.
+
+:func:`render_fit_report` returns the page as a string, :func:`write_fit_report` writes it
+atomically (a failure leaves no partial file). The page is a Jinja2 template with autoescaping
+on — everything that comes from a log (file names, unit names, notes) is escaped — and the
+figures are PNGs embedded as ``data:`` URIs; there is no script and nothing is loaded over the
+network.
+
+A report needs a :class:`~ropod_sysid.fit.FitResult`. Without refitting, one is rebuilt from a
+parameter file by :func:`result_from_parameter_file`: the file's values and standard deviations,
+with the residuals, singular values, rank and null space of the given logs.
+
+What is computed always uses every sample; only what is plotted is decimated
+(:mod:`ropod_sysid.report.figures`).
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import math
+import os
+from collections.abc import Sequence
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import jinja2
+import numpy as np
+
+from ropod_sysid import __version__
+from ropod_sysid.errors import InputError
+from ropod_sysid.fit import FitOptions, FitResult, LogFit, fit_systems
+from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.log import Log
+from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file
+from ropod_sysid.model import PlatformModel
+from ropod_sysid.params import (
+    DESCRIPTION,
+    INERTIAL,
+    UNITS_OF,
+    DynamicParameters,
+    Friction,
+    kind_of,
+    parameter_names,
+)
+from ropod_sysid.platform import Platform
+from ropod_sysid.regressor import Span, preprocess, system, triangles
+from ropod_sysid.report import figures
+from ropod_sysid.solve import combined_rms
+from ropod_sysid.summary import identifiability_verdict, implausible, relative_std
+from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
+
+__all__ = ["render_fit_report", "result_from_parameter_file", "write_fit_report"]
+
+WEAK_RELATIVE_STD = 0.2  # the summary's threshold for "weakly determined"
+
+
+# ---------------------------------------------------------------------------------------------
+# a FitResult from a parameter file (no refit)
+
+
+def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: ParameterFile,
+                               span: Span | None = None, where: str = "<parameters>",
+                               ) -> tuple[FitResult, list[str]]:
+    """What a report needs, from a parameter file and logs, without refitting.
+
+    The values and standard deviations are the file's; the per-log and total residual RMS are
+    those of these values on ``logs``; the singular values, rank, condition number and null
+    space are those of the weighted stacked regressor of ``logs`` (the least-squares solution
+    of these logs is computed for that, but its values are not shown). The friction model,
+    span (unless ``span`` is given), input delay and fixed parameters come from the file.
+
+    Returns the result and notes for the reader (e.g. friction coefficients missing in the file).
+    """
+    if not logs:
+        raise InputError("no logs given; pass one or more log files")
+    units = platform.unit_names
+    values = pfile.values()
+    stds = pfile.stds()
+    notes: list[str] = []
+    friction = _friction_of(pfile, values, where)
+    names = parameter_names(units, friction)
+    unknown = [k for k in values if k not in names]
+    if unknown:
+        raise InputError(
+            f"{where}: parameter(s) {', '.join(unknown[:6])} are not parameters of the "
+            f"{friction} friction model of units {', '.join(units)}; is this the parameter file "
+            "of this platform?")
+    for k in INERTIAL:
+        if k not in values:
+            raise InputError(f"{where}: parameter '{k}' is missing; a parameter file gives all "
+                             f"of {', '.join(INERTIAL)}")
+    bad = [k for k, v in values.items() if not math.isfinite(v)]
+    if bad:
+        raise InputError(f"{where}: parameter '{bad[0]}' has no finite value")
+    missing = [k for k in names if k not in values]
+    if missing:
+        notes.append(f"{len(missing)} friction coefficient(s) missing in the parameter file "
+                     f"({', '.join(missing[:4])}{'…' if len(missing) > 4 else ''}) are taken "
+                     "as 0")
+    if pfile.platform != platform.name:
+        notes.append(f"the parameter file is for platform '{pfile.platform}', the platform "
+                     f"file describes '{platform.name}'")
+    span = span if span is not None else _span_of(pfile, where)
+    delay = _delay_of(pfile, where)
+    fixed = {k: values[k] for k in names
+             if k in values and pfile.parameters[k].get("fixed") is True}
+    extra_fixed = pfile.extras.get("fixed")
+    if isinstance(extra_fixed, dict):
+        fixed.update({str(k): float(v) for k, v in extra_fixed.items()
+                      if str(k) in names and isinstance(v, int | float)})
+    options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay)
+
+    model = PlatformModel(platform)
+    systems = []
+    log_notes = []
+    for log in logs:
+        pre = preprocess(log, platform, span, delay)
+        log_notes.append(pre.notes)
+        systems.append(triangles(model, pre, friction))
+    sol, weights = fit_systems(systems, names, options)
+
+    m = np.array([values.get(k, 0.0) for k in names])
+    std = np.array([np.nan if stds.get(k) is None else float(stds[k]) for k in names])  # type: ignore[arg-type]
+    combination = sol.combination.copy()
+    combinations = {}
+    for j, k in enumerate(names):
+        entry = pfile.parameters.get(k, {})
+        if entry.get("combination") is True:
+            combination[j] = True
+            combinations[k] = str(entry.get("meaning") or "flagged as a combination in the "
+                                  "parameter file")
+        elif sol.combination[j]:
+            combinations[k] = f"{sol.combinations.get(k, '')} (with these logs)"
+    solution = dataclasses.replace(sol, values=m, std=std, combination=combination,
+                                   combinations=combinations, fixed=fixed)
+    per_log = [LogFit(log.source, s.rows, w, s.rms(m), n, s)
+               for log, s, w, n in zip(logs, systems, weights, log_notes, strict=True)]
+    result = FitResult(platform, options, solution, per_log, combined_rms(systems, m), delay)
+    return result, notes
+
+
+def _friction_of(pfile: ParameterFile, values: dict[str, float], where: str) -> Friction:
+    declared = pfile.extras.get("friction")
+    if declared in ("per-wheel", "shared"):
+        return declared  # type: ignore[return-value]
+    if declared is not None:
+        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
+    return "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel"
+
+
+def _span_of(pfile: ParameterFile, where: str) -> Span:
+    text = pfile.extras.get("span")
+    if text is None:
+        return Span.parse(None)
+    try:
+        return Span.parse(str(text).replace(" samples", "").strip())
+    except InputError:
+        raise InputError(f"{where}: key 'span' is {text!r}; expected e.g. '0.1s' or "
+                         "'21 samples', or give --span") from None
+
+
+def _delay_of(pfile: ParameterFile, where: str) -> float:
+    d = pfile.extras.get("input_delay_s")
+    if d is None:
+        return 0.0
+    if isinstance(d, bool) or not isinstance(d, int | float) or not math.isfinite(d) or d < 0:
+        raise InputError(f"{where}: key 'input_delay_s' must be a non-negative number of "
+                         f"seconds, got {d!r}")
+    return float(d)
+
+
+# ---------------------------------------------------------------------------------------------
+# rendering
+
+
+@lru_cache(maxsize=1)
+def _environment() -> jinja2.Environment:
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("ropod_sysid.report", "templates"),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+    env.filters["num"] = _num
+    env.filters["pct"] = _pct
+    return env
+
+
+def _num(value: Any, digits: int = 4) -> str:
+    """A number for a table cell: ``digits`` significant digits; — when unknown."""
+    if value is None:
+        return "—"
+    v = float(value)
+    if math.isnan(v):
+        return "—"
+    if math.isinf(v):
+        return "∞" if v > 0 else "−∞"
+    # 2438, not 2.44e+03
+    text = f"{v:.0f}" if 10**digits <= abs(v) < 1e7 else f"{v:.{digits}g}"
+    return text.replace("-", "−")
+
+
+def _pct(value: Any, digits: int = 1) -> str:
+    if value is None or not math.isfinite(float(value)):
+        return "—"
+    return f"{100 * float(value):.{digits}f} %"
+
+
+def _short(source: str) -> str:
+    """The file name of a log's source, for narrow table cells (the full path is shown too)."""
+    return Path(source).name or source
+
+
+def _png_uri(data: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def _verdict_class(text: str) -> str:
+    if text.startswith("well"):
+        return "good"
+    if text.startswith("rank deficient"):
+        return "bad"
+    return "warn"
+
+
+def _dof_rms(err: np.ndarray) -> dict[str, float]:
+    if err.shape[0] == 0:
+        return {k: float("nan") for k in ("x", "y", "theta", "translation", "rotation")}
+    ms = np.mean(err**2, axis=0)
+    return {"x": float(np.sqrt(ms[0])), "y": float(np.sqrt(ms[1])),
+            "theta": float(np.sqrt(ms[2])), "translation": float(np.sqrt(0.5 * (ms[0] + ms[1]))),
+            "rotation": float(np.sqrt(ms[2]))}
+
+
+def _log_views(result: FitResult, logs: Sequence[Log], shown: np.ndarray,
+               ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray]:
+    """Per log: the figures and numbers; all logs' errors and velocities stacked."""
+    platform = result.platform
+    model = PlatformModel(platform)
+    friction = result.options.friction
+    views, errs, vels = [], [], []
+    for k, (log, lf) in enumerate(zip(logs, result.logs, strict=True)):
+        pre = preprocess(log, platform, result.options.span, result.input_delay)
+        n = len(pre.t)
+        kept = slice(pre.trim, n - pre.trim)
+        b = np.empty((n - 2 * pre.trim, 3))
+        fit = np.empty_like(b)
+        for sl, a_blk, b_blk in system(model, pre, friction):  # bounded memory
+            rows = slice(sl.start - pre.trim, sl.stop - pre.trim)
+            b[rows] = b_blk
+            fit[rows] = a_blk @ shown
+        t = pre.t[kept]
+        err = b - fit
+        errs.append(err)
+        vels.append(pre.qd[kept])
+        pose = pre.q
+        views.append({
+            "index": k,
+            "id": f"log-{k + 1}",
+            "source": lf.source,
+            "name": _short(lf.source),
+            "samples": int(err.shape[0]),
+            "raw_samples": log.n_samples,
+            "duration": log.duration,
+            "rate": 1.0 / pre.dt if pre.dt > 0 else float("nan"),
+            "weight": lf.weight,
+            "rms": _dof_rms(err),
+            "notes": list(lf.notes),
+            "span_samples": pre.span_samples,
+            "fig13": _png_uri(figures.fit_vs_measured(t, b, fit)),
+            "inputs": _png_uri(figures.inputs(
+                log.t, pose, pre.t, pre.qd, np.unwrap(log.delta, axis=0),
+                platform.torque_constant * log.current, platform.unit_names)),
+            "pose_source": "tracker (x_b, y_b, θ_b columns)" if log.pose is not None
+            else "odometry",
+        })
+    all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
+    all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
+    return views, all_err, all_vel
+
+
+def _parameter_rows(result: FitResult, shown: np.ndarray,
+                    compare: ParameterFile | None) -> tuple[list[dict[str, Any]], list[str]]:
+    sol = result.solution
+    rel = relative_std(result)
+    other = compare.values() if compare is not None else {}
+    other_std = compare.stds() if compare is not None else {}
+    rows = []
+    for j, name in enumerate(sol.names):
+        kind = kind_of(name)
+        value = float(shown[j])
+        std = float(sol.std[j])
+        flags = []
+        if name in sol.fixed:
+            flags.append(("fixed", "fixed", "held fixed in the fit"))
+        if sol.combination[j]:
+            flags.append(("combination", "combination",
+                          sol.combinations.get(name, "determined only in combination")))
+        if implausible(name, value):
+            flags.append(("implausible", "implausible",
+                          "negative mass or inertia: physically implausible"))
+        row: dict[str, Any] = {
+            "name": name, "unit": UNITS_OF.get(kind, ""), "description": DESCRIPTION.get(kind, ""),
+            "value": value, "std": std if math.isfinite(std) else None,
+            "rel": float(rel[j]) if math.isfinite(rel[j]) else None,
+            "weak": bool(math.isfinite(rel[j]) and rel[j] > WEAK_RELATIVE_STD),
+            "flags": flags,
+        }
+        if compare is not None:
+            o = other.get(name)
+            row["other"] = o
+            row["other_std"] = other_std.get(name)
+            if o is not None and math.isfinite(o):
+                diff = value - o
+                row["diff"] = diff
+                row["rel_diff"] = diff / abs(o) if o != 0 else None
+                row["z"] = diff / std if math.isfinite(std) and std > 0 else None
+            else:
+                row["diff"] = row["rel_diff"] = row["z"] = None
+        rows.append(row)
+    only_other = [k for k in other if k not in sol.names]
+    return rows, only_other
+
+
+def render_fit_report(result: FitResult, logs: Sequence[Log], *,
+                      compare: str | Path | ParameterFile | None = None,
+                      compare_label: str | None = None,
+                      validation_logs: Sequence[Log] | None = None,
+                      params_source: str | None = None,
+                      notes: Sequence[str] = (),
+                      title: str | None = None) -> str:
+    """The report of ``result`` on ``logs`` (the fit's logs, in the fit's order) as HTML.
+
+    compare : a parameter file (path or read) shown side by side with the differences
+    validation_logs : logs the fit was not fitted on: residual RMS and disturbance observer
+    params_source : where the values come from when the result was rebuilt from a file
+    notes : further remarks for the reader (shown in the summary)
+    """
+    if len(logs) != len(result.logs):
+        raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
+                         f"{len(logs)}")
+    compare_pf, compare_label = _compare(compare, compare_label)
+    platform = result.platform
+    sol = result.solution
+    physical = result.physical is not None
+    shown = result.physical.values if result.physical is not None else sol.values
+    rms = result.physical_rms if result.physical_rms is not None else result.rms
+    verdict = identifiability_verdict(result)
+
+    log_views, all_err, all_vel = _log_views(result, logs, shown)
+    rows, only_other = _parameter_rows(result, shown, compare_pf)
+    n_free = len(sol.names) - len(sol.fixed)
+
+    validation = []
+    if validation_logs:
+        params = DynamicParameters.from_vector(shown, platform.unit_names,
+                                               result.options.friction)
+        for k, v in enumerate(validate_logs(validation_logs, platform, params,
+                                            result.options.span, result.input_delay)):
+            validation.append({
+                "id": f"validation-{k + 1}", "source": v.source, "name": _short(v.source),
+                "samples": v.samples,
+                "rms": v.rms, "observer_rms": v.observer_rms, "observer_max": v.observer_max,
+                "share_above": v.share_above,
+                "alarm": v.share_above["force"] > 0 or v.share_above["torque"] > 0,
+                "figure": _png_uri(figures.observer(v.t, v.f_hat, FORCE_THRESHOLD,
+                                                    TORQUE_THRESHOLD)),
+            })
+
+    warnings = []
+    n_implausible = sum(1 for r in rows if any(f[0] == "implausible" for f in r["flags"]))
+    if n_implausible:
+        warnings.append(f"{n_implausible} value(s) physically implausible (negative mass or "
+                        "inertia): the logs may not excite them, or a combination is shown")
+    if any(v["alarm"] for v in validation):
+        warnings.append("the disturbance observer exceeds its threshold on a validation log")
+
+    context = {
+        "title": title or f"Fit report — {platform.name}",
+        "version": __version__,
+        "platform": {"name": platform.name, "source": platform.source,
+                     "units": platform.unit_names, "n_units": platform.n_units,
+                     "torque_constant": platform.torque_constant},
+        "logs": log_views,
+        "samples": int(sum(v["samples"] for v in log_views)),
+        "span": str(result.options.span),
+        "friction": result.options.friction,
+        "rms": rms,
+        "rms_free": result.rms if physical else None,
+        "physical": physical,
+        "rank": sol.rank,
+        "n_free": n_free,
+        "n_params": len(sol.names),
+        "condition_number": sol.condition_number,
+        "rcond": result.options.rcond,
+        "input_delay_ms": 1000.0 * result.input_delay,
+        "verdict": verdict,
+        "verdict_class": _verdict_class(verdict),
+        "params_source": params_source,
+        "notes": list(notes),
+        "warnings": warnings,
+        "weak_threshold": WEAK_RELATIVE_STD,
+        "parameters": rows,
+        "compare_label": compare_label,
+        "only_other": only_other,
+        "n_implausible": n_implausible,
+        "n_combination": int(np.sum(sol.combination)),
+        "sv_figure": _png_uri(figures.singular_values(sol.singular_values, sol.rank,
+                                                      result.options.rcond)),
+        "null_space": sol.null_space_text(),
+        "combinations": [(k, v) for k, v in sol.combinations.items()],
+        "hist_figure": _png_uri(figures.residual_histograms(all_err)),
+        "vel_figure": _png_uri(figures.residual_vs_velocity(all_vel, all_err)),
+        "validation": validation,
+        "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
+    }
+    return _environment().get_template("report.html").render(**context)
+
+
+def _compare(compare: str | Path | ParameterFile | None, label: str | None,
+             ) -> tuple[ParameterFile | None, str | None]:
+    if compare is None:
+        return None, None
+    if isinstance(compare, ParameterFile):
+        return compare, label or "comparison"
+    return read_parameter_file(compare), label or Path(compare).name
+
+
+def write_fit_report(result: FitResult, logs: Sequence[Log], path: str | Path, *,
+                     compare: str | Path | ParameterFile | None = None,
+                     validation_logs: Sequence[Log] | None = None,
+                     **options: Any) -> None:
+    """Render the report (see :func:`render_fit_report`) and write it to ``path`` atomically:
+    on any error no file, not even a partial one, is left at ``path``."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory; give the report's file name, e.g. "
+                         "report.html")
+    html = render_fit_report(result, logs, compare=compare, validation_logs=validation_logs,
+                             **options)
+    try:
+        with atomic_path(path) as tmp:
+            tmp.write_text(html, encoding="utf-8")
+            tmp.chmod(0o666 & ~_umask())  # a document to share (the temporary file is 0600)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the report ({exc.strerror or exc})") from None
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask

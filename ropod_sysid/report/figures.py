@@ -1,0 +1,333 @@
+"""The report's figures: small functions from arrays to PNG bytes (matplotlib, Agg).
+
+Every figure is drawn on its own :class:`matplotlib.figure.Figure` with the Agg canvas (no
+pyplot, no global state, no display needed). What is *plotted* is decimated to at most
+``MAX_POINTS`` points per line; what is *computed* (RMS values, histograms, binned means) always
+uses every sample. Line data are decimated by keeping the minimum and maximum of each bucket, so
+that a single spike in a long log still shows.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+
+import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator
+
+MAX_POINTS = 2000
+DPI = 96
+DOF_LABELS = ("x", "y", "θ")
+DOF_UNITS = ("N", "N", "N m")
+VEL_LABELS = ("ẋ [m/s]", "ẏ [m/s]", "θ̇ [rad/s]")
+BLUE, ORANGE, GREY, RED, GREEN = "#1f5fa8", "#e07b00", "#7f8790", "#c0392b", "#2e8b57"
+PALETTE = ("#1f5fa8", "#e07b00", "#2e8b57", "#c0392b", "#7b4fa0", "#8c564b", "#d6619e",
+           "#5a6b7b", "#b5a000", "#17a2b8")
+
+_STYLE = {
+    "font.size": 8.5,
+    "axes.titlesize": 9.5,
+    "axes.labelsize": 8.5,
+    "axes.grid": True,
+    "grid.color": "#dde1e6",
+    "grid.linewidth": 0.6,
+    "axes.edgecolor": "#9aa3ad",
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "legend.fontsize": 7.5,
+    "legend.frameon": False,
+    "lines.linewidth": 1.0,
+    "xtick.labelsize": 7.5,
+    "ytick.labelsize": 7.5,
+    "path.simplify": True,
+    "agg.path.chunksize": 10000,
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# decimation (plotting only)
+
+
+def decimate(x: np.ndarray, y: np.ndarray, max_points: int = MAX_POINTS,
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """At most ~``max_points`` points of the line (x, y): the min and max of each bucket, in
+    order, so that peaks survive. ``y`` may be (n,) or (n, k); returns one line's x and y when
+    1-D, else x (m, k) and y (m, k) with each column decimated on its own."""
+    x = np.asarray(x)
+    y = np.asarray(y)
+    n = len(x)
+    if n <= max_points:
+        return x, y
+    buckets = max(max_points // 2, 1)
+    edges = np.linspace(0, n, buckets + 1).astype(int)
+    size = int(np.max(np.diff(edges)))
+    # pad each bucket to the same size with its own last sample, then argmin/argmax row-wise
+    starts = edges[:-1]
+    idx = np.minimum(starts[:, None] + np.arange(size)[None, :], (edges[1:] - 1)[:, None])
+    cols = y[:, None] if y.ndim == 1 else y
+    xs, ys = [], []
+    for j in range(cols.shape[1]):
+        v = cols[idx, j]  # (buckets, size)
+        with np.errstate(invalid="ignore"):
+            lo = idx[np.arange(buckets), np.nanargmin(np.where(np.isnan(v), np.inf, v), axis=1)]
+            hi = idx[np.arange(buckets), np.nanargmax(np.where(np.isnan(v), -np.inf, v), axis=1)]
+        keep = np.sort(np.stack([lo, hi], axis=1), axis=1).ravel()
+        xs.append(x[keep])
+        ys.append(cols[keep, j])
+    if y.ndim == 1:
+        return xs[0], ys[0]
+    return np.stack(xs, axis=1), np.stack(ys, axis=1)
+
+
+def subsample(n: int, max_points: int = MAX_POINTS, seed: int = 0) -> np.ndarray:
+    """Sorted random indices of at most ``max_points`` of ``n`` samples (for scatter plots)."""
+    if n <= max_points:
+        return np.arange(n)
+    rng = np.random.default_rng(seed)
+    return np.sort(rng.choice(n, size=max_points, replace=False))
+
+
+# ---------------------------------------------------------------------------------------------
+# plumbing
+
+
+def _figure(width: float, height: float, **margins: float) -> Figure:
+    """A figure with fixed margins (fractions of the figure; a layout engine would cost more
+    time than the drawing itself)."""
+    fig = Figure(figsize=(width, height), dpi=DPI)
+    FigureCanvasAgg(fig)
+    fig.subplots_adjust(**{"left": 0.07, "right": 0.985, "top": 0.94, "bottom": 0.12, **margins})
+    return fig
+
+
+def _png(fig: Figure) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI, facecolor="white",
+                metadata={"Software": None})
+    return buf.getvalue()
+
+
+def _line(ax, x: np.ndarray, y: np.ndarray, **kw) -> None:
+    xd, yd = decimate(x, y)
+    ax.plot(xd, yd, **kw)
+
+
+def _title(ax, text: str) -> None:
+    """Left-aligned axes title at a fixed height (matplotlib's automatic title placement
+    measures the tick labels and costs more than drawing the axes)."""
+    ax.set_title(text, loc="left", y=1.0, pad=4.0)
+
+
+def _legend_above(ax, **kw) -> None:
+    """Legend right-aligned above the axes (next to a left-aligned title), off the data."""
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.1,
+              handlelength=1.6, columnspacing=1.0, **kw)
+
+
+def _style():
+    return matplotlib.rc_context(_STYLE)
+
+
+# ---------------------------------------------------------------------------------------------
+# figures
+
+
+def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray) -> bytes:
+    """The thesis's Fig. 13 for one log: per DOF the fit A_ID,ext m* against the filtered b_ID
+    (upper panel) and the error b_ID − A_ID,ext m* (lower panel), over time."""
+    with _style():
+        fig = _figure(10.0, 8.4, top=0.97, bottom=0.055)
+        gs = fig.add_gridspec(6, 1, height_ratios=[3, 1.3] * 3, hspace=0.32)
+        axes = [fig.add_subplot(gs[k]) for k in range(6)]
+        for k in range(1, 6):
+            axes[k].sharex(axes[0])
+        err = b - fit
+        for d in range(3):
+            top, bot = axes[2 * d], axes[2 * d + 1]
+            _line(top, t, b[:, d], color=GREY, lw=1.6, label="b_ID (filtered)")
+            _line(top, t, fit[:, d], color=BLUE, lw=0.9, label="A_ID,ext m*")
+            top.set_ylabel(f"{DOF_LABELS[d]} [{DOF_UNITS[d]}]")
+            rms = float(np.sqrt(np.mean(err[:, d] ** 2))) if len(err) else float("nan")
+            _title(top, f"{DOF_LABELS[d]} row of the direct EOM")
+            top.text(0.995, 0.96, f"RMS error {rms:.3g} {DOF_UNITS[d]}", transform=top.transAxes,
+                     ha="right", va="top", fontsize=8, color=RED,
+                     bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1.5})
+            _line(bot, t, err[:, d], color=RED, lw=0.8)
+            bot.axhline(0.0, color="#444", lw=0.6)
+            bot.set_ylabel("error")
+            bot.yaxis.set_major_locator(MaxNLocator(3))
+            top.tick_params(labelbottom=False)
+            if d < 2:
+                bot.tick_params(labelbottom=False)
+        _legend_above(axes[0], ncols=2)
+        axes[-1].set_xlabel("t [s]")
+        return _png(fig)
+
+
+def inputs(t: np.ndarray, pose: np.ndarray, t_vel: np.ndarray, qd: np.ndarray,
+           delta: np.ndarray, torque: np.ndarray, units: Sequence[str]) -> bytes:
+    """The inputs of one log: base path (x–y), base velocities, pivot angles, wheel torques.
+
+    t : (N,) raw log time; pose : (M, 3) base pose on the preprocessed grid ``t_vel``;
+    qd : (M, 3) base velocities; delta : (N, n) pivot angles [rad]; torque : (N, n, 2) [N m].
+    """
+    with _style():
+        fig = _figure(10.0, 6.4, top=0.95, bottom=0.08, left=0.065, right=0.99)
+        gs = fig.add_gridspec(2, 2, wspace=0.2, hspace=0.32)
+        ax_path = fig.add_subplot(gs[0, 0])
+        ax_vel = fig.add_subplot(gs[0, 1])
+        ax_piv = fig.add_subplot(gs[1, 0])
+        ax_tau = fig.add_subplot(gs[1, 1], sharex=ax_piv)
+        xd, yd = decimate(pose[:, 0], pose[:, 1])
+        # y's bucket extremes, x at the same (sorted) indices: the path stays in order
+        ax_path.plot(xd, yd, color=BLUE, lw=1.1)
+        ax_path.plot(pose[0, 0], pose[0, 1], "o", color=GREEN, ms=5, label="start")
+        ax_path.plot(pose[-1, 0], pose[-1, 1], "s", color=RED, ms=5, label="end")
+        ax_path.set_aspect("equal", adjustable="datalim")
+        ax_path.set_xlabel("x_b [m]")
+        ax_path.set_ylabel("y_b [m]")
+        _title(ax_path, "base path")
+        _legend_above(ax_path, ncols=2)
+        for d, (lab, col) in enumerate(zip(VEL_LABELS, (BLUE, ORANGE, GREEN), strict=True)):
+            _line(ax_vel, t_vel, qd[:, d], color=col, label=lab)
+        ax_vel.set_xlabel("t [s]")
+        _title(ax_vel, "base velocities")
+        _legend_above(ax_vel, ncols=3)
+        for i, u in enumerate(units):
+            _line(ax_piv, t, np.degrees(delta[:, i]), color=PALETTE[i % len(PALETTE)],
+                  label=f"δ {u}")
+        ax_piv.set_xlabel("t [s]")
+        ax_piv.set_ylabel("[deg]")
+        _title(ax_piv, "pivot angles")
+        _legend_above(ax_piv, ncols=min(len(units), 8))
+        handles = []
+        for i, u in enumerate(units):
+            col = PALETTE[i % len(PALETTE)]
+            _line(ax_tau, t, torque[:, i, 0], color=col, lw=0.8)
+            _line(ax_tau, t, torque[:, i, 1], color=col, lw=0.8, ls="--")
+            handles.append(Line2D([], [], color=col, label=str(u)))
+        handles += [Line2D([], [], color="#333", label="L"),
+                    Line2D([], [], color="#333", ls="--", label="R")]
+        ax_tau.set_xlabel("t [s]")
+        ax_tau.set_ylabel("[N m]")
+        _title(ax_tau, "wheel torques")
+        _legend_above(ax_tau, handles=handles, ncols=min(len(handles), 8))
+        return _png(fig)
+
+
+def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:
+    """Singular values of the column-scaled weighted stacked regressor (log scale), with the
+    threshold rcond·σ_max below which a direction counts as not identifiable."""
+    with _style():
+        fig = _figure(10.0, 3.0, bottom=0.16, top=0.9)
+        ax = fig.add_subplot()
+        k = np.arange(1, len(sv) + 1)
+        colors = [BLUE if j < rank else RED for j in range(len(sv))]
+        positive = sv[sv > 0]
+        floor = float(positive.min()) * 1e-2 if positive.size else 1e-16
+        ax.bar(k, np.maximum(sv, floor), color=colors, width=0.7, alpha=0.85)
+        ax.plot(k, sv, "o-", color="#333", ms=2.5, lw=0.7)
+        if len(sv):
+            ax.axhline(rcond * sv[0], color=RED, ls="--", lw=0.9,
+                       label=f"threshold rcond·σ₁ = {rcond * sv[0]:.2g}")
+            _legend_above(ax)
+        ax.set_yscale("log")
+        ax.set_xlabel("index")
+        ax.set_ylabel("singular value")
+        ax.set_xticks(k if len(k) <= 40 else k[:: int(np.ceil(len(k) / 40))])
+        ax.set_xlim(0.3, len(sv) + 0.7)
+        _title(ax, "column-scaled, weighted, stacked regressor")
+        return _png(fig)
+
+
+def residual_histograms(residuals: np.ndarray) -> bytes:
+    """Histogram of the error b − A m* per DOF over all samples of all logs, with the normal
+    density of the same mean and standard deviation."""
+    with _style():
+        fig = _figure(10.0, 2.8, left=0.02, bottom=0.17, top=0.9)
+        axes = fig.subplots(1, 3, gridspec_kw={"wspace": 0.08})
+        for d, ax in enumerate(axes):
+            r = residuals[:, d]
+            r = r[np.isfinite(r)]
+            if r.size == 0:
+                continue
+            mu, sd = float(np.mean(r)), float(np.std(r))
+            # the bulk with a margin (robust scale); outliers pile up in the end bins
+            mad = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+            lim = max(6.0 * mad, float(np.quantile(np.abs(r - mu), 0.95)), 1e-12)
+            bins = np.linspace(mu - lim, mu + lim, 81)
+            ax.hist(np.clip(r, bins[0], bins[-1]), bins=bins, density=True, color=BLUE,
+                    alpha=0.75, edgecolor="white", linewidth=0.3)
+            if sd > 0:
+                x = np.linspace(bins[0], bins[-1], 200)
+                ax.plot(x, np.exp(-0.5 * ((x - mu) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)),
+                        color=ORANGE, lw=1.2, label="normal, same σ")
+            ax.set_xlabel(f"error {DOF_LABELS[d]} [{DOF_UNITS[d]}]")
+            _title(ax, f"{DOF_LABELS[d]}: mean {mu:.3g}, σ {sd:.3g}")
+            ax.set_yticks([])
+            if d == 0:
+                ax.legend(loc="upper left")
+        return _png(fig)
+
+
+def residual_vs_velocity(velocity: np.ndarray, residuals: np.ndarray, bins: int = 41) -> bytes:
+    """Per DOF the error against the corresponding base velocity: a thinned scatter of the
+    samples and the mean error in velocity bins (over all samples). Unmodelled friction shows
+    as a step or slope through zero velocity."""
+    with _style():
+        fig = _figure(10.0, 3.0, left=0.07, bottom=0.16, top=0.95)
+        axes = fig.subplots(1, 3, gridspec_kw={"wspace": 0.32})
+        for d, ax in enumerate(axes):
+            v, r = velocity[:, d], residuals[:, d]
+            ok = np.isfinite(v) & np.isfinite(r)
+            v, r = v[ok], r[ok]
+            if v.size == 0:
+                continue
+            pick = subsample(v.size, MAX_POINTS, seed=d)
+            ax.plot(v[pick], r[pick], ".", ms=1.6, color=BLUE, alpha=0.35, rasterized=True)
+            lo, hi = np.quantile(v, [0.002, 0.998])
+            if hi > lo:
+                edges = np.linspace(lo, hi, bins + 1)
+                which = np.clip(np.digitize(v, edges) - 1, 0, bins - 1)
+                inside = (v >= lo) & (v <= hi)
+                count = np.bincount(which[inside], minlength=bins)
+                total = np.bincount(which[inside], weights=r[inside], minlength=bins)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    mean = np.where(count >= 5, total / count, np.nan)
+                centre = 0.5 * (edges[:-1] + edges[1:])
+                ax.plot(centre, mean, "-", color=ORANGE, lw=1.6, label="binned mean")
+            ax.axhline(0.0, color="#444", lw=0.6)
+            ax.axvline(0.0, color="#444", lw=0.6)
+            ylim = max(float(np.quantile(np.abs(r), 0.99)), 1e-12) * 1.5
+            ax.set_ylim(-ylim, ylim)
+            ax.set_xlabel(VEL_LABELS[d])
+            ax.set_ylabel(f"error {DOF_LABELS[d]} [{DOF_UNITS[d]}]")
+            if d == 0:
+                ax.legend(loc="upper left")
+        return _png(fig)
+
+
+def observer(t: np.ndarray, f_hat: np.ndarray, force_threshold: float,
+             torque_threshold: float) -> bytes:
+    """The disturbance observer's view (thesis Fig. 16): low-passed F̂_bx, F̂_by and T̂_bz over
+    time with the ±thresholds."""
+    with _style():
+        fig = _figure(10.0, 5.2, top=0.97, bottom=0.09)
+        axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"hspace": 0.15})
+        labels = ("F̂_bx [N]", "F̂_by [N]", "T̂_bz [N m]")
+        for d, ax in enumerate(axes):
+            thr = force_threshold if d < 2 else torque_threshold
+            _line(ax, t, f_hat[:, d], color=(BLUE, ORANGE, GREEN)[d], lw=0.9)
+            for s in (1, -1):
+                ax.axhline(s * thr, color=RED, ls="--", lw=0.9)
+            ax.set_ylabel(labels[d])
+            peak = float(np.max(np.abs(f_hat[:, d]))) if len(f_hat) else 0.0
+            ax.set_ylim(-1.15 * max(thr, peak), 1.15 * max(thr, peak))
+            ax.text(0.995, 0.95, f"threshold ±{thr:g}", transform=ax.transAxes, ha="right",
+                    va="top", fontsize=7.5, color=RED)
+        axes[-1].set_xlabel("t [s]")
+        return _png(fig)
