@@ -19,7 +19,7 @@ from ropod_sysid.regressor import Span
 @platform_option
 @click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
               help="Parameter file of a fit (json, yaml or ros2).")
-@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--out", "out_path", required=True, type=click.Path(),
               help="HTML report to write (one self-contained file).")
 @click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
               help="Another parameter file shown side by side (e.g. a fixed-masses fit or the "

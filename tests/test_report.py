@@ -1,0 +1,363 @@
+"""The HTML fit report: sections, figures, escaping, no network, the report command, Chromium."""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import os
+import shutil
+import subprocess
+from html.parser import HTMLParser
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from ropod_sysid.cli.main import main
+from ropod_sysid.errors import InputError
+from ropod_sysid.fit import fit_logs
+from ropod_sysid.io import write_log
+from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, write_parameter_file
+from ropod_sysid.params import thesis_fixed_masses
+from ropod_sysid.platform import ropod_platform, save_platform
+from ropod_sysid.report import render_fit_report, result_from_parameter_file, write_fit_report
+from ropod_sysid.report.figures import MAX_POINTS, decimate
+from ropod_sysid.simulate import Setpoints, simulate
+
+PIVOTS = np.array([[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]])
+SECTIONS = ("summary", "fit", "parameters", "singular-values", "residuals", "inputs")
+EVIL = "<script>alert(1)</script>"
+
+
+def setpoints(duration: float, sx: float, sw: float, phase: float) -> Setpoints:
+    """Rest to rest: smooth sinusoids under a smoothstep envelope."""
+    t = np.arange(0.0, duration + 0.005, 0.01)
+    u0, u1 = np.clip(t / 1.2, 0, 1), np.clip((duration - 0.3 - t) / 1.2, 0, 1)
+    env = u0**2 * (3 - 2 * u0) * u1**2 * (3 - 2 * u1)
+    vx = sx * env * (0.5 + 0.3 * np.sin(2 * np.pi * t / 3 + phase))
+    vy = sx * sw * env * 0.3 * np.sin(2 * np.pi * t / 4 + phase)
+    om = sw * env * 0.8 * np.sin(2 * np.pi * t / 2.5 + phase)
+    return Setpoints(t, vx, vy, om)
+
+
+@pytest.fixture(scope="module")
+def sim():
+    """Three 6 s runs simulated together: two to fit, one to validate on."""
+    platform = ropod_platform().with_pivots(PIVOTS)
+    params = thesis_fixed_masses(platform.unit_names)
+    # 2.5 ms RK4 steps (stride 2 to the 200 Hz log): the report needs plausible runs, not
+    # the 1 ms fidelity of the identification tests
+    runs = simulate(platform, params, [setpoints(6.0, 1, 1, 0.0), setpoints(6.0, -1, -1, 1.0),
+                                       setpoints(6.0, 1, -1, 2.0)], rate=200.0, dt=2.5e-3)
+    logs = [dataclasses.replace(r.log, source=f"run{k}.csv") for k, r in enumerate(runs)]
+    result = fit_logs(logs[:2], platform)
+    return platform, params, logs, result
+
+
+@pytest.fixture(scope="module")
+def truth_file(sim) -> ParameterFile:
+    platform, params, _, result = sim
+    values = params.to_mapping(platform.unit_names)
+    return ParameterFile(platform.name, {k: {"value": v, "std": None} for k, v in values.items()},
+                         {"translation": 0.0, "rotation": 0.0}, 1.0, len(values), 0)
+
+
+@pytest.fixture(scope="module")
+def full_html(sim, truth_file) -> str:
+    platform, _, logs, result = sim
+    return render_fit_report(result, logs[:2], compare=truth_file, compare_label="truth.json",
+                             validation_logs=[logs[2]])
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, sim, truth_file):
+    """Platform, logs (one with markup in its file name), parameter files on disk."""
+    platform, _, logs, result = sim
+    d = tmp_path_factory.mktemp("report")
+    save_platform(platform, d / "platform.yaml")
+    names = ["run0.csv", f"run1{EVIL.replace('/', '')}.csv", "val.csv"]
+    paths = []
+    for log, name in zip(logs, names, strict=True):
+        write_log(log, d / name)
+        paths.append(d / name)
+    write_parameter_file(result.parameter_file(), d / "params.json")
+    write_parameter_file(truth_file, d / "truth.json")
+    return d, paths
+
+
+class Page(HTMLParser):
+    """Tags, attributes, ids, images and inline text of a page."""
+
+    def __init__(self, html: str) -> None:
+        super().__init__(convert_charrefs=True)
+        self.tags: list[tuple[str, dict[str, str | None]]] = []
+        self.ids: set[str] = set()
+        self.styles: list[str] = []
+        self.text: list[str] = []
+        self._in_style = False
+        self.feed(html)
+        self.close()
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        self.tags.append((tag, a))
+        if a.get("id"):
+            self.ids.add(a["id"])
+        self._in_style = tag == "style"
+
+    def handle_endtag(self, tag):
+        if tag == "style":
+            self._in_style = False
+
+    def handle_data(self, data):
+        (self.styles if self._in_style else self.text).append(data)
+
+    def all(self, tag: str) -> list[dict[str, str | None]]:
+        return [a for t, a in self.tags if t == tag]
+
+
+def check_self_contained(page: Page) -> None:
+    """Nothing on the page loads anything over the network, and there is no script."""
+    assert not page.all("script"), "the report needs no JavaScript"
+    assert not page.all("link"), "no external stylesheets"
+    for tag in ("iframe", "object", "embed", "base"):
+        assert not page.all(tag)
+    for tag, attrs in page.tags:
+        for name, value in attrs.items():
+            assert not name.startswith("on"), (tag, name)  # no event handlers
+            if name in ("src", "href", "srcset", "action", "poster", "data", "xlink:href"):
+                v = (value or "").strip().lower()
+                assert not v.startswith(("http:", "https:", "//", "ftp:")), (tag, name, v)
+                if name == "src":
+                    assert v.startswith("data:image/"), (tag, v[:40])
+                if name == "href":
+                    assert v.startswith("#"), (tag, v)  # in-page anchors only
+            if name == "style":
+                assert "url(" not in (value or "").lower()
+    css = "".join(page.styles).lower()
+    assert "@import" not in css and "url(" not in css and "@font-face" not in css
+
+
+def check_images(page: Page, expected: int) -> None:
+    imgs = page.all("img")
+    assert len(imgs) + len(page.all("svg")) == expected
+    for img in imgs:
+        src = img["src"] or ""
+        assert src.startswith("data:image/png;base64,")
+        png = base64.b64decode(src.split(",", 1)[1], validate=True)
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+        assert img.get("alt")
+
+
+# ---------------------------------------------------------------------------------------------
+# the page
+
+
+def test_every_section_and_figure(full_html):
+    page = Page(full_html)
+    for sid in (*SECTIONS, "validation", "null-space", "parameter-table"):
+        assert sid in page.ids, sid
+    # per fit log: Fig. 13 and inputs; singular values, histograms, residual vs velocity;
+    # one observer view per validation log
+    check_images(page, 2 * 2 + 3 + 1)
+    assert len(page.all("figcaption")) == 8
+    text = " ".join(page.text)
+    for phrase in ("RMS translation", "RMS rotation", "Condition number", "Input delay",
+                   "Friction model", "per-wheel", "Smoother span", "Rank"):
+        assert phrase in text, phrase
+
+
+def test_self_contained(full_html):
+    check_self_contained(Page(full_html))
+    assert "<script" not in full_html.lower()
+
+
+def test_summary_numbers_are_the_fit(sim, full_html):
+    _, _, _, result = sim
+    text = " ".join(Page(full_html).text)
+    assert f"{result.rms['translation']:.4g}" in text
+    assert f"{result.rms['rotation']:.4g}" in text
+    assert f"{result.solution.rank} of {len(result.solution.names)} free" in text
+
+
+def test_compare_table_side_by_side(sim, full_html):
+    _, params, _, result = sim
+    page = Page(full_html)
+    # the table's rows: one per parameter, with the comparison's value and the difference
+    body = full_html.split('id="parameter-table"', 1)[1].split("</table>", 1)[0]
+    rows = body.split("<tr>")[2:]  # header row first
+    assert len(rows) == len(result.names)
+    assert "truth.json" in " ".join(page.text)
+    m_b = next(r for r in rows if ">m_b<" in r)
+    assert ">35.1<" in m_b  # the truth's value
+    cells = Page(m_b).text
+    diff = result.solution.values[0] - 35.1
+    assert any(c.replace("−", "-") == f"{diff:.3g}" for c in cells), cells
+
+
+def test_log_text_is_escaped(sim):
+    platform, _, logs, _ = sim
+    evil = [dataclasses.replace(logs[0], source=EVIL,
+                                notes=['<img src="http://x/y.png" onerror="alert(2)">'])]
+    result = fit_logs(evil, platform)
+    html = render_fit_report(result, evil, validation_logs=[
+        dataclasses.replace(logs[2], source="<b onmouseover=alert(3)>v</b>")])
+    assert "<script" not in html.lower()
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html
+    assert '<img src="http' not in html and "<b onmouseover" not in html
+    page = Page(html)
+    check_self_contained(page)
+    assert EVIL in " ".join(page.text)  # shown to the reader as text
+
+
+def test_rebuilt_from_the_parameter_file_equals_the_fit(sim, files):
+    platform, _, logs, result = sim
+    d, _ = files
+    pfile = read_parameter_file(d / "params.json")
+    rebuilt, notes = result_from_parameter_file(platform, logs[:2], pfile)
+    assert notes == []
+    np.testing.assert_allclose(rebuilt.solution.values, result.solution.values, rtol=1e-12)
+    np.testing.assert_allclose(rebuilt.solution.std, result.solution.std, rtol=1e-12)
+    for k in ("translation", "rotation"):
+        assert rebuilt.rms[k] == pytest.approx(result.rms[k], rel=1e-9)
+    assert rebuilt.solution.rank == result.solution.rank
+    assert rebuilt.solution.condition_number == pytest.approx(result.solution.condition_number)
+    np.testing.assert_allclose(rebuilt.solution.singular_values,
+                               result.solution.singular_values, rtol=1e-9)
+
+
+def test_written_atomically_without_compare_or_validation(sim, tmp_path):
+    platform, _, logs, result = sim
+    out = tmp_path / "r.html"
+    with pytest.raises(InputError, match="no such parameter file"):
+        write_fit_report(result, logs[:2], out, compare=tmp_path / "missing.json")
+    assert list(tmp_path.iterdir()) == []  # not even a temporary file
+    write_fit_report(result, logs[:2], out)
+    assert out.stat().st_mode & 0o044  # a document to share, not a 0600 temporary file
+    assert [p.name for p in tmp_path.iterdir()] == ["r.html"]
+    html = out.read_text(encoding="utf-8")
+    page = Page(html)
+    assert "validation" not in page.ids
+    assert all(s in page.ids for s in SECTIONS)
+    check_self_contained(page)
+    check_images(page, 2 * 2 + 3)
+    assert "Δ/σ" not in html
+
+
+def test_decimation_keeps_peaks_and_bounds_points():
+    t = np.linspace(0.0, 100.0, 50_001)
+    y = np.sin(t)
+    y[12_345] = 50.0  # one spike in a long log
+    xd, yd = decimate(t, y)
+    assert len(xd) <= MAX_POINTS and np.all(np.diff(xd) >= 0)
+    assert yd.max() == 50.0 and yd.min() == pytest.approx(-1.0, abs=1e-3)
+    xs, ys = decimate(t, np.column_stack([y, -y]))
+    assert xs.shape == ys.shape and ys.shape[1] == 2 and ys[:, 1].min() == -50.0
+    short = np.arange(10.0)
+    assert decimate(short, short)[0] is short
+
+
+# ---------------------------------------------------------------------------------------------
+# the commands
+
+
+def run(*args: object):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def test_report_command(files):
+    d, (log0, log1, val) = files
+    out = d / "out" / "report.html"
+    r = run("report", log0, log1, "--platform", d / "platform.yaml", "--params",
+            d / "params.json", "--out", out, "--compare", d / "truth.json", "--validate", val,
+            "--quiet")
+    assert r.exit_code == 0, r.output
+    html = out.read_text(encoding="utf-8")
+    page = Page(html)
+    check_self_contained(page)
+    check_images(page, 2 * 2 + 3 + 1)
+    assert {*SECTIONS, "validation"} <= page.ids
+    assert "<script" not in html.lower()  # the log's file name holds <script>
+    assert "&lt;script&gt;alert(1)&lt;script&gt;" in html
+    assert "truth.json" in html and "params.json" in html
+
+
+def test_fit_with_report(files):
+    d, (log0, log1, val) = files
+    out = d / "fit-report.html"
+    r = run("fit", log0, log1, "--platform", d / "platform.yaml", "--out", d / "p2.json",
+            "--report", out, "--compare", d / "truth.json", "--validate", val, "--quiet")
+    assert r.exit_code == 0, r.output
+    page = Page(out.read_text(encoding="utf-8"))
+    assert {*SECTIONS, "validation"} <= page.ids
+
+
+@pytest.mark.parametrize("case", ["missing-params", "foreign-params", "bad-log", "bad-compare",
+                                  "bad-span", "out-is-dir"])
+def test_report_bad_input(files, tmp_path, case):
+    d, (log0, log1, _) = files
+    out = tmp_path / "report.html"
+    args = [log0, "--platform", d / "platform.yaml", "--params", d / "params.json"]
+    if case == "missing-params":
+        args[-1] = tmp_path / "nope.json"
+    elif case == "foreign-params":
+        p = tmp_path / "foreign.json"
+        p.write_text('{"platform": "x", "parameters": {"m_b": {"value": 1, "std": null}, '
+                     '"warp_drive": {"value": 2, "std": null}}, "rms": {"translation": 1, '
+                     '"rotation": 1}, "condition_number": 1, "rank": 1, "samples": 1}')
+        args[-1] = p
+    elif case == "bad-log":
+        bad = tmp_path / "bad.csv"
+        bad.write_text("t,delta_1\n0,0\n")
+        args[0] = bad
+    elif case == "bad-compare":
+        args += ["--compare", tmp_path / "nope.json"]
+    elif case == "bad-span":
+        args += ["--span", "-3"]
+    elif case == "out-is-dir":
+        out = tmp_path
+    r = run("report", *args, "--out", out)
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), r.output
+    if case != "out-is-dir":
+        assert not out.exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".report.html")]
+
+
+# ---------------------------------------------------------------------------------------------
+# a real browser
+
+
+def chromium() -> str | None:
+    for name in ("chromium", "chromium-browser"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return "/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None
+
+
+@pytest.mark.skipif(chromium() is None,
+                    reason="chromium is not installed (CI installs it: apt-get install chromium)")
+def test_chromium_renders_the_report(full_html, tmp_path):
+    import matplotlib.image
+
+    page = tmp_path / "report.html"
+    page.write_text(full_html, encoding="utf-8")
+    shot = tmp_path / "shot.png"
+    cmd = [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+           "--no-first-run", "--disable-background-networking", "--disable-component-update",
+           "--disable-sync", "--hide-scrollbars", f"--user-data-dir={tmp_path / 'profile'}",
+           f"--screenshot={shot}", "--window-size=1200,2000", page.as_uri()]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert shot.exists(), proc.stderr[-2000:]
+    img = matplotlib.image.imread(shot)
+    assert img.shape[:2] == (2000, 1200)
+    rgb = np.round(img[..., :3] * 255).astype(np.uint8).reshape(-1, 3)
+    colours = np.unique(rgb[:, 0].astype(np.uint32) << 16 | rgb[:, 1].astype(np.uint32) << 8
+                        | rgb[:, 2])
+    assert len(colours) > 200, len(colours)  # text, tables and plotted figures, not a blank page
+    assert img[..., :3].std() > 0.05
+    # the dark header band and a figure below it: the page is laid out, not a plain text dump
+    assert img[30, :, :3].mean() < 0.4
+    assert img[1000:2000, :, :3].std() > 0.05
