@@ -19,12 +19,36 @@ from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.odometry import odometry
+from ropod_sysid.odometry import constraint_system
 from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
-from ropod_sysid.solve import Triangles
+from ropod_sysid.solve import Triangles, qr_triangle
 
 DEFAULT_SPAN_S = 0.1
+QR_LEAF_ROWS = 256  # rows per leaf QR of a block's TSQR (small: fast, cache-resident)
+GRID_STEPS = 10_000  # the sample time is the median of the first this many steps
+UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
+
+
+def grid_step(t: np.ndarray) -> float:
+    """Sample time [s] of a log: the median of its first :data:`GRID_STEPS` time steps.
+
+    Only the head of the log is used, so that a streaming pass (:mod:`ropod_sysid.stream`)
+    knows the grid after one chunk and chooses exactly the grid of the in-memory path.
+    """
+    return float(np.median(np.diff(np.asarray(t[: GRID_STEPS + 1], dtype=float))))
+
+
+def on_grid(steps: np.ndarray, dt: float) -> bool:
+    """Whether every time step is within :data:`UNIFORM_RTOL` of the sample time ``dt``."""
+    steps = np.asarray(steps, dtype=float)
+    return bool(steps.size == 0 or np.max(np.abs(steps - dt)) <= UNIFORM_RTOL * dt)
+
+
+def jitter_note(source: str, max_step: float, min_step: float, dt: float) -> str:
+    """The note of a log whose sample times were put on a uniform grid."""
+    return (f"{source}: sample times jitter (max step {max_step:.4g} s, min {min_step:.4g} s); "
+            f"resampled to a uniform {dt:.4g} s grid")
 
 
 @dataclass
@@ -109,18 +133,17 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     delta = np.unwrap(log.delta, axis=0)
     phi, current = log.phi, log.current
     pose = log.pose
-    if not signals.is_uniform(t, rtol=1e-3):
-        dt = float(np.median(np.diff(t)))
+    dt = grid_step(t)
+    steps = np.diff(t)
+    if not on_grid(steps, dt):
         t_new, delta = signals.resample_uniform(t, delta, dt)
         _, phi = signals.resample_uniform(t, phi, dt)
         _, current = signals.resample_uniform(t, current, dt)
         if pose is not None:
             _, pose = signals.resample_uniform(t, np.column_stack(
                 [pose[:, :2], np.unwrap(pose[:, 2])]), dt)
-        notes.append(f"{log.source}: sample times jitter (max step {np.diff(t).max():.4g} s, "
-                     f"min {np.diff(t).min():.4g} s); resampled to a uniform {dt:.4g} s grid")
+        notes.append(jitter_note(log.source, steps.max(), steps.min(), dt))
         t = t_new
-    dt = float((t[-1] - t[0]) / (len(t) - 1))
     n = len(t)
     k = span.samples(dt, n)
     trim = k  # the shifted end windows of both filter stages
@@ -131,7 +154,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     delta_s = signals.loess(delta, k)
     phi_s = signals.loess(phi, k)
     if pose is None:
-        q = odometry(platform, delta_s, phi_s)
+        q, _ = odometry_from(platform, delta_s, phi_s)
     else:
         q = signals.loess(np.column_stack([pose[:, :2], np.unwrap(pose[:, 2])]), k)
     qd = signals.central_difference(q, dt)
@@ -145,6 +168,69 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
                        axis=1).reshape(tau.shape)
     return Preprocessed(t, q, qd, qdd, delta_s, delta_dot, phi_dot, tau, log.source, k, dt,
                         notes, trim)
+
+
+def unwrap_from(p: np.ndarray, corr0: np.ndarray | None = None,
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`numpy.unwrap` along axis 0, continued from the correction ``corr0`` that an
+    unwrap of the earlier samples added at ``p[0]`` (None: p[0] is the first sample).
+
+    Returns the unwrapped samples and the correction at each sample; with the same formula
+    and a sequential cumulative sum it equals one ``np.unwrap`` over the whole signal bit for
+    bit, however the signal is cut into pieces.
+    """
+    p = np.asarray(p, dtype=float)
+    period = 2 * np.pi
+    low, high = -period / 2, period / 2
+    dd = np.diff(p, axis=0)
+    ddmod = np.mod(dd - low, period) + low
+    np.copyto(ddmod, high, where=(ddmod == low) & (dd > 0))
+    ph = ddmod - dd
+    np.copyto(ph, 0, where=np.abs(dd) < high)
+    start = np.zeros_like(p[:1]) if corr0 is None else np.asarray(corr0, float)[None]
+    corr = np.cumsum(np.concatenate([start, ph]), axis=0)
+    return p + corr, corr
+
+
+@dataclass
+class OdometryState:
+    """Where wheel odometry stands at one sample: the pose (x_b, y_b, θ_b) and the correction
+    unwrapping has added to each pivot angle there (to continue it over the next samples)."""
+
+    pose: np.ndarray  # (3,)
+    unwrap: np.ndarray  # (n,)
+
+
+def odometry_from(platform: Platform, delta: np.ndarray, phi: np.ndarray,
+                  start: OdometryState | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Base pose (N, 3) from smoothed encoder angles, as :func:`ropod_sysid.odometry.odometry`,
+    continued from ``start`` at sample 0 (None: the pose is zero there).
+
+    The per-interval least squares on the no-slip constraints is solved by a batched QR of the
+    (3n × 3) constraint matrices; the pose is the sequential cumulative sum of the displacements
+    from the start pose, so that a log cut into overlapping pieces gives the pose of one pass.
+    Returns the pose and the unwrapping corrections of δ per sample (for :class:`OdometryState`).
+    """
+    delta, corr = unwrap_from(delta, None if start is None else start.unwrap)
+    phi = np.asarray(phi, float)
+    d_delta = np.diff(delta, axis=0)
+    d_phi = np.diff(phi, axis=0)
+    mid = delta[:-1] + 0.5 * d_delta
+    a, b = constraint_system(platform, mid, d_delta, d_phi)
+    qm, rm = np.linalg.qr(a)
+    rhs = np.einsum("nji,nj->ni", qm, b)
+    step = np.linalg.solve(rm, rhs[..., None])[..., 0]  # displacements in the base frame
+    pose0 = np.zeros(3) if start is None else np.asarray(start.pose, float)
+    theta = np.cumsum(np.concatenate([pose0[2:], step[:, 2]]))
+    heading = theta[:-1] + 0.5 * step[:, 2]
+    c, s = np.cos(heading), np.sin(heading)
+    dx = c * step[:, 0] - s * step[:, 1]
+    dy = s * step[:, 0] + c * step[:, 1]
+    pose = np.empty((delta.shape[0], 3))
+    pose[:, 0] = np.cumsum(np.concatenate([pose0[:1], dx]))
+    pose[:, 1] = np.cumsum(np.concatenate([pose0[1:2], dy]))
+    pose[:, 2] = theta
+    return pose, corr
 
 
 def raw_system(model: PlatformModel, pre: Preprocessed,
@@ -183,12 +269,33 @@ def filtered_system(model: PlatformModel, pre: Preprocessed,
     return (np.concatenate([a for _, a, _ in parts]), np.concatenate([b for _, _, b in parts]))
 
 
+def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
+    """:meth:`Triangles.from_rows` of A (m, 3, p) and b (m, 3) by a two-level TSQR: leaves of
+    :data:`QR_LEAF_ROWS` rows reduced by one batched QR, their triangles by one more. Same
+    triangle up to rounding (and row signs), several times faster on tall blocks."""
+    m, _, p = a.shape
+    full = m // QR_LEAF_ROWS * QR_LEAF_ROWS
+    r = np.empty((3, p + 1, p + 1))
+    rows = np.empty((m, p + 1))
+    for d in range(3):
+        rows[:, :p] = a[:, d, :]
+        rows[:, p] = b[:, d]
+        parts = []
+        if full:
+            leaves = np.linalg.qr(rows[:full].reshape(-1, QR_LEAF_ROWS, p + 1), mode="r")
+            parts.append(leaves.reshape(-1, p + 1))
+        if m > full:
+            parts.append(rows[full:])
+        r[d] = qr_triangle(np.vstack(parts))
+    return Triangles(r, m, label)
+
+
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
               chunk: int = 20000) -> Triangles:
     """The log's QR triangles per DOF, built block by block (memory bounded by ``chunk``)."""
     tri: Triangles | None = None
     for _, a, b in system(model, pre, friction, chunk):
-        block = Triangles.from_rows(a, b, pre.source)
+        block = block_triangles(a, b, pre.source)
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")
