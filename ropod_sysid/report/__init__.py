@@ -206,7 +206,10 @@ def _num(value: Any, digits: int = 4) -> str:
 def _pct(value: Any, digits: int = 1) -> str:
     if value is None or not math.isfinite(float(value)):
         return "—"
-    return f"{100 * float(value):.{digits}f} %"
+    text = f"{100 * float(value):.{digits}f}"
+    if float(text) == 0:
+        text = text.lstrip("-")  # no "-0.0 %"
+    return text.replace("-", "−") + " %"
 
 
 def _short(source: str) -> str:

@@ -148,7 +148,8 @@ def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray) -> bytes:
         err = b - fit
         for d in range(3):
             top, bot = axes[2 * d], axes[2 * d + 1]
-            _line(top, t, b[:, d], color=GREY, lw=1.6, label="b_ID (filtered)")
+            # b wide and light, the fit thin on top: both stay visible where they agree
+            _line(top, t, b[:, d], color="#aeb8c3", lw=3.0, label="b_ID (filtered)")
             _line(top, t, fit[:, d], color=BLUE, lw=0.9, label="A_ID,ext m*")
             top.set_ylabel(f"{DOF_LABELS[d]} [{DOF_UNITS[d]}]")
             rms = float(np.sqrt(np.mean(err[:, d] ** 2))) if len(err) else float("nan")
@@ -158,7 +159,7 @@ def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray) -> bytes:
                      bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1.5})
             _line(bot, t, err[:, d], color=RED, lw=0.8)
             bot.axhline(0.0, color="#444", lw=0.6)
-            bot.set_ylabel("error")
+            bot.set_ylabel(f"error [{DOF_UNITS[d]}]")
             bot.yaxis.set_major_locator(MaxNLocator(3))
             top.tick_params(labelbottom=False)
             if d < 2:
