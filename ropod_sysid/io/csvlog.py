@@ -15,6 +15,7 @@ Line numbers in messages are 1-based lines of the file, the header being line 1.
 from __future__ import annotations
 
 import csv
+import gzip
 import math
 import re
 from collections.abc import Iterator
@@ -57,7 +58,7 @@ def contract_columns(units: list[str]) -> list[str]:
 
 
 def read_csv_log(path: str | Path, platform: Platform) -> Log:
-    """Read a contract CSV log for ``platform``.
+    """Read a contract CSV log for ``platform`` (``.csv``, or gzip-compressed ``.csv.gz``).
 
     Columns ``t``, ``delta_u``, ``phi_uL``, ``phi_uR``, ``cur_uL``, ``cur_uR`` for every unit
     ``u`` of the platform are required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
@@ -66,10 +67,69 @@ def read_csv_log(path: str | Path, platform: Platform) -> Log:
     """
     where = str(path)
     path = Path(path)
+    n_fields, wanted, col_idx, pose_present = _layout(path, where, platform)
+
+    data = _fast_read(path, n_fields, col_idx)
+    if data is None:
+        # Arrow stopped, or there is NaN/inf: find the first bad line (raises), or read the
+        # oddities the fast reader refuses (whitespace-only lines).
+        data = _diagnose(path, where, n_fields, wanted, col_idx)
+
+    _check_rows(where, data.shape[1], MIN_SAMPLES)
+    _check_time(path, where, data[0])
+    return _to_log(data, platform, pose_present, where)
+
+
+def iter_csv_log(path: str | Path, platform: Platform, chunk_rows: int = 50_000,
+                 ) -> Iterator[Log]:
+    """Read a contract CSV log (``.csv`` or ``.csv.gz``) as consecutive logs of ``chunk_rows``
+    samples (the last one shorter), in memory bounded by the chunk size.
+
+    The checks and messages are those of :func:`read_csv_log`, applied chunk by chunk with the
+    file's line numbers: the header and columns before the first chunk; a row that Arrow
+    refuses, a NaN or infinite value, or time not increasing (also across chunks) raise
+    :class:`InputError` when the pass reaches them — chunks before it may already have been
+    yielded, so a consumer must not act on a partial pass. Too few rows raise at the end.
+    """
+    if chunk_rows < 1:
+        raise ValueError(f"chunk_rows must be positive, got {chunk_rows}")
+    where = str(path)
+    path = Path(path)
+    n_fields, wanted, col_idx, pose_present = _layout(path, where, platform)
+    rows = 0  # rows yielded
+    t_prev: float | None = None
+    pending: list[np.ndarray] = []  # held back until there are enough rows for a log
+
+    def emit(data: np.ndarray) -> Log:
+        nonlocal rows, t_prev
+        _check_time(path, where, data[0], rows, t_prev)
+        rows += data.shape[1]
+        t_prev = float(data[0, -1])
+        return _to_log(data, platform, pose_present, where)
+
+    blocks = _stream_data(path, where, n_fields, wanted, col_idx, chunk_rows)
+    for data in _rechunk(blocks, chunk_rows):
+        pending.append(data)
+        if rows + sum(p.shape[1] for p in pending) >= MIN_SAMPLES:
+            for held in pending:
+                yield emit(held)
+            pending = []
+    _check_rows(where, rows + sum(p.shape[1] for p in pending), MIN_SAMPLES)
+    for held in pending:  # pragma: no cover - only with chunk_rows < MIN_SAMPLES
+        yield emit(held)
+
+
+def check_csv_header(path: str | Path, platform: Platform) -> None:
+    """The header checks of :func:`read_csv_log` alone (before a long streaming pass)."""
+    _layout(Path(path), str(path), platform)
+
+
+def _layout(path: Path, where: str, platform: Platform
+            ) -> tuple[int, list[str], list[int], bool]:
+    """Header checks: (number of fields, wanted column names, their indices, pose present)."""
     header = _read_header(path, where)
     names = [h.strip() for h in header]
-    units = platform.unit_names
-    required = contract_columns(units)
+    required = contract_columns(platform.unit_names)
     _check_columns(names, required, platform, where)
     pose_present = [c for c in POSE_COLUMNS if c in names]
     if pose_present and len(pose_present) < len(POSE_COLUMNS):
@@ -82,32 +142,47 @@ def read_csv_log(path: str | Path, platform: Platform) -> Log:
         )
     wanted = required + (list(POSE_COLUMNS) if pose_present else [])
     index = {name: k for k, name in enumerate(names)}
-    col_idx = [index[c] for c in wanted]
+    return len(names), wanted, [index[c] for c in wanted], bool(pose_present)
 
-    data = _fast_read(path, len(names), col_idx)
-    if data is None:
-        # Arrow stopped, or there is NaN/inf: find the first bad line (raises), or read the
-        # oddities the fast reader refuses (whitespace-only lines).
-        data = _diagnose(path, where, len(names), wanted, col_idx)
 
+def _to_log(data: np.ndarray, platform: Platform, pose_present: bool, where: str) -> Log:
+    """The log of the wanted columns ``data`` (k, N) in contract order."""
+    units = platform.unit_names
     n = data.shape[1]
-    _check_rows_and_time(path, where, data[0], MIN_SAMPLES)
-    t = data[0]
-
     n_units = len(units)
     unit_block = data[1:1 + 5 * n_units].reshape(n_units, 5, n)
     delta = np.ascontiguousarray(unit_block[:, 0, :].T)
     phi = np.ascontiguousarray(unit_block[:, 1:3, :].transpose(2, 0, 1))
     current = np.ascontiguousarray(unit_block[:, 3:5, :].transpose(2, 0, 1))
     pose = np.ascontiguousarray(data[1 + 5 * n_units:].T) if pose_present else None
-    return Log(t=np.ascontiguousarray(t), units=list(units), delta=delta, phi=phi,
+    return Log(t=np.ascontiguousarray(data[0]), units=list(units), delta=delta, phi=phi,
                current=current, pose=pose, source=where)
 
+
+def _rechunk(blocks: Iterator[np.ndarray], rows: int) -> Iterator[np.ndarray]:
+    """Blocks of columns (k, m) regrouped into blocks of exactly ``rows`` (the last shorter)."""
+    held: list[np.ndarray] = []
+    count = 0
+    for block in blocks:
+        while block.shape[1]:
+            take = min(rows - count, block.shape[1])
+            held.append(block[:, :take])
+            count += take
+            block = block[:, take:]
+            if count == rows:
+                yield held[0] if len(held) == 1 else np.concatenate(held, axis=1)
+                held, count = [], 0
+    if count:
+        yield held[0] if len(held) == 1 else np.concatenate(held, axis=1)
 
 
 def _check_rows_and_time(path: Path, where: str, t: np.ndarray, min_rows: int) -> None:
     """Enough data rows, and strictly increasing time (one-line errors with file lines)."""
-    n = t.shape[0]
+    _check_rows(where, t.shape[0], min_rows)
+    _check_time(path, where, t)
+
+
+def _check_rows(where: str, n: int, min_rows: int) -> None:
     if n == 0:
         raise InputError(
             f"{where}: the file has a header but no data rows; it needs at least "
@@ -118,15 +193,22 @@ def _check_rows_and_time(path: Path, where: str, t: np.ndarray, min_rows: int) -
             f"{where}: only {n} data row{'s' if n != 1 else ''}; at least {min_rows} samples "
             "are needed — use a longer log"
         )
-    steps = np.diff(t)
+
+
+def _check_time(path: Path, where: str, t: np.ndarray, row0: int = 0,
+                t_prev: float | None = None) -> None:
+    """Time strictly increasing over data rows row0… (``t_prev``: the time of row row0 − 1)."""
+    ext = t if t_prev is None else np.concatenate([[t_prev], t])
+    first = row0 if t_prev is None else row0 - 1  # data row of ext[0]
+    steps = np.diff(ext)
     bad = np.flatnonzero(~(steps > 0))
     if bad.size:
         k = int(bad[0])
-        lines = _data_row_lines(path, k + 2)
+        lines = _data_row_lines(path, first + k + 2)
         raise InputError(
-            f"{where}: line {lines[k + 1]}: time t={float(t[k + 1])!r} is not after "
-            f"t={float(t[k])!r} on line {lines[k]}; time must strictly increase — sort the rows "
-            "or remove repeated samples"
+            f"{where}: line {lines[first + k + 1]}: time t={float(ext[k + 1])!r} is not after "
+            f"t={float(ext[k])!r} on line {lines[first + k]}; time must strictly increase — "
+            "sort the rows or remove repeated samples"
         )
 
 
@@ -165,9 +247,12 @@ def read_numeric_table(path: str | Path, required: list[str],
 
 def _open(path: Path, where: str, binary: bool = False):
     """Open the log (binary, or as text with undecodable bytes shown as U+FFFD)."""
+    gz = path.name.lower().endswith(".gz")
     try:
         if binary:
-            return open(path, "rb")  # noqa: SIM115
+            return gzip.open(path, "rb") if gz else open(path, "rb")  # noqa: SIM115
+        if gz:
+            return gzip.open(path, "rt", encoding="utf-8-sig", errors="replace", newline="")
         return open(path, encoding="utf-8-sig", errors="replace", newline="")  # noqa: SIM115
     except FileNotFoundError:
         raise InputError(f"{where}: no such log file; check the path") from None
@@ -289,11 +374,99 @@ def _fast_read(path: Path, n_cols: int, col_idx: list[int]) -> np.ndarray | None
     return out
 
 
+class _FastFailed(Exception):
+    pass
+
+
+def _fast_chunks(path: Path, n_cols: int, col_idx: list[int], block_size: int,
+                 ) -> Iterator[np.ndarray]:
+    """Streaming counterpart of :func:`_fast_read`: the wanted columns block by block; raises
+    :class:`_FastFailed` where Arrow stops or a value is NaN, missing or infinite."""
+    arrow_names = [f"c{k}" for k in range(n_cols)]
+    include = [arrow_names[k] for k in col_idx]
+    try:
+        reader = pacsv.open_csv(
+            path,
+            read_options=pacsv.ReadOptions(column_names=arrow_names, skip_rows=1,
+                                           block_size=block_size),
+            parse_options=pacsv.ParseOptions(delimiter=","),
+            convert_options=pacsv.ConvertOptions(
+                column_types={c: pa.float64() for c in include}, include_columns=include,
+            ),
+        )
+    except (pa.ArrowException, ValueError, OSError):
+        raise _FastFailed from None
+    with reader:
+        while True:
+            try:
+                batch = reader.read_next_batch()
+            except StopIteration:
+                return
+            except (pa.ArrowException, ValueError, OSError):
+                raise _FastFailed from None
+            n = batch.num_rows
+            out = np.empty((len(include), n), dtype=np.float64)
+            for j in range(len(include)):
+                col = batch.column(j)
+                if col.null_count:
+                    raise _FastFailed
+                out[j] = col.to_numpy()
+            if n and not np.isfinite(out).all():
+                raise _FastFailed
+            yield out
+
+
+def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_idx: list[int],
+                 chunk_rows: int) -> Iterator[np.ndarray]:
+    """The wanted columns of the data rows, block by block, with the checks of
+    :func:`read_csv_log`: fast Arrow blocks while the file is clean; from the first block Arrow
+    refuses (or holding NaN/inf) on, :func:`_diagnose_chunks` from the start of the file, which
+    raises for the first bad line or reads on past harmless oddities (blank-looking lines)."""
+    block_size = max(1 << 16, min(chunk_rows * _row_bytes(path, where), 1 << 28))
+    done = 0
+    try:
+        for data in _fast_chunks(path, n_fields, col_idx, block_size):
+            done += data.shape[1]
+            yield data
+        return
+    except _FastFailed:
+        pass
+    for data in _diagnose_chunks(path, where, n_fields, wanted, col_idx):
+        if done >= data.shape[1]:
+            done -= data.shape[1]
+            continue
+        yield data[:, done:]
+        done = 0
+
+
+def _row_bytes(path: Path, where: str) -> int:
+    """Bytes per data row, estimated from the first few rows (for Arrow's block size)."""
+    with _open(path, where, binary=True) as f:
+        try:
+            head = f.read(1 << 16)
+        except OSError as exc:
+            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
+                from None
+    lines = head.split(b"\n")[1:-1] or [head]
+    return max(16, int(1.25 * max(len(ln) + 1 for ln in lines)))
+
+
 def _diagnose(path: Path, where: str, n_fields: int, wanted: list[str],
               col_idx: list[int]) -> np.ndarray:
     """Error path: stream the file through Arrow as text, single-threaded so that Arrow knows
     the line numbers; raise for the first bad line, or return the data when nothing is wrong
     but blank-looking lines. Falls back to the csv module if Arrow cannot even do that."""
+    chunks = list(_diagnose_chunks(path, where, n_fields, wanted, col_idx))
+    if not chunks:
+        return np.empty((len(col_idx), 0), dtype=np.float64)
+    return np.concatenate(chunks, axis=1)
+
+
+def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
+                     col_idx: list[int]) -> Iterator[np.ndarray]:
+    """:func:`_diagnose` block by block: yields the data of clean blocks as (k, m) arrays and
+    raises :class:`InputError` at the first bad line (a wrong field count only once the rows
+    after it show it is not the truncated last line)."""
     arrow_names = [f"c{k}" for k in range(n_fields)]
     skipped: list[int] = []                 # lines Arrow did not turn into rows, ascending
     invalid: list[tuple[int, int]] = []     # (line, fields) of non-blank wrong-length rows
@@ -328,7 +501,7 @@ def _diagnose(path: Path, where: str, n_fields: int, wanted: list[str],
         )
 
     order = sorted(range(len(col_idx)), key=col_idx.__getitem__)   # file column order
-    chunks: list[np.ndarray] = []
+    yielded = 0
     row0 = 0
     last_data_line = 0
     try:
@@ -368,21 +541,23 @@ def _diagnose(path: Path, where: str, n_fields: int, wanted: list[str],
             if invalid and (len(invalid) > 1 and invalid[1][0] <= last_data_line
                             or last_data_line > invalid[0][0]):
                 raise count_error(last=False)
+            row0 += n
             if not invalid:
                 keep = pa.array(~blank)
-                chunks.append(np.array(
+                data = np.array(
                     [pc.cast(pc.filter(cols[k], keep), pa.float64()).to_numpy() for k in col_idx],
-                    dtype=np.float64).reshape(len(col_idx), -1))
-            row0 += n
-    except _NoLineNumbers:
-        return _slow_read(path, where, n_fields, wanted, col_idx)
-    except pa.ArrowException:
-        return _slow_read(path, where, n_fields, wanted, col_idx)
+                    dtype=np.float64).reshape(len(col_idx), -1)
+                yielded += data.shape[1]
+                yield data
+    except (_NoLineNumbers, pa.ArrowException):
+        # Arrow cannot even read it as text: the csv module, row by row (the rows already
+        # yielded are skipped)
+        rest = _slow_read(path, where, n_fields, wanted, col_idx)
+        if rest.shape[1] > yielded:
+            yield rest[:, yielded:]
+        return
     if invalid:
         raise count_error(last=len(invalid) == 1 and last_data_line < invalid[0][0])
-    if not chunks:
-        return np.empty((len(col_idx), 0), dtype=np.float64)
-    return np.concatenate(chunks, axis=1)
 
 
 class _NoLineNumbers(Exception):
