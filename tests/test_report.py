@@ -195,11 +195,21 @@ def test_compare_table_side_by_side(sim, full_html):
     assert any(c.replace("−", "-") == f"{diff:.3g}" for c in cells), cells
 
 
-def test_log_text_is_escaped(sim):
+def test_log_text_is_escaped_and_null_space_shown(sim):
     platform, _, logs, _ = sim
     evil = [dataclasses.replace(logs[0], source=EVIL,
                                 notes=['<img src="http://x/y.png" onerror="alert(2)">'])]
     result = fit_logs(evil, platform)
+    # as if the logs could not separate m_b from m_wh (a rank-deficient fit)
+    sol = result.solution
+    null = np.zeros((len(sol.names), 1))
+    null[[0, 2], 0] = [0.8, -0.6]
+    combination = np.zeros(len(sol.names), dtype=bool)
+    combination[[0, 2]] = True
+    result.solution = dataclasses.replace(
+        sol, rank=len(sol.names) - 1, null_space=null, combination=combination,
+        condition_number=float("inf"),
+        combinations={"m_b": "m_b +0.75·m_wh", "m_wh": "not identifiable alone: set to 0"})
     html = render_fit_report(result, evil, validation_logs=[
         dataclasses.replace(logs[2], source="<b onmouseover=alert(3)>v</b>")])
     assert "<script" not in html.lower()
@@ -208,6 +218,10 @@ def test_log_text_is_escaped(sim):
     page = Page(html)
     check_self_contained(page)
     assert EVIL in " ".join(page.text)  # shown to the reader as text
+    assert "rank deficient" in html
+    null_items = html.split('id="null-space"', 1)[1].split("</ul>", 1)[0]
+    assert null_items.count("<li") == 1 and "m_b" in null_items and "m_wh" in null_items
+    assert html.count('<span class="flag combination"') == 2
 
 
 def test_rebuilt_from_the_parameter_file_equals_the_fit(sim, files):
