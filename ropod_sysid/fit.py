@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -146,31 +147,76 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
     return solve(r, rows, names, options.fix, options.rcond), weights
 
 
+Reduce = Callable[[float], list[tuple[str, Triangles, list[str]]]]
+
+
 def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None = None,
              progress: Callable[[str], None] | None = None) -> FitResult:
-    """Fit the dynamic parameters to several logs stacked together (eqs. 36–38)."""
+    """Fit the dynamic parameters to several in-memory logs stacked together (eqs. 36–38).
+
+    Each log is preprocessed whole (:func:`ropod_sysid.regressor.preprocess`); for log files of
+    any length use :func:`fit_files`, which streams them.
+    """
     options = options or FitOptions()
     if not logs:
         raise InputError("no logs given; pass one or more log files")
     model = PlatformModel(platform)
-    names = model.parameter_names(options.friction)
     say = progress or (lambda _msg: None)
 
-    notes: dict[str, list[str]] = {}
-
-    def systems_for(delay: float) -> list[Triangles]:
+    def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
         out = []
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay)
-            notes[log.source] = pre.notes
-            out.append(triangles(model, pre, options.friction))
+            out.append((log.source, triangles(model, pre, options.friction), pre.notes))
         return out
 
+    return _fit(reduce, platform, options)
+
+
+def fit_files(paths: Sequence[str | Path], platform: Platform,
+              options: FitOptions | None = None, workers: int | None = None,
+              dask_address: str | None = None, chunk: int | None = None,
+              progress: Callable[[str], None] | None = None) -> FitResult:
+    """Fit the dynamic parameters to log files, each read and reduced in chunks.
+
+    Every log is streamed (:func:`ropod_sysid.stream.stream_log`: memory bounded by ``chunk``
+    samples, default :data:`ropod_sysid.stream.DEFAULT_CHUNK`) to its QR triangles per DOF; the
+    result equals :func:`fit_logs` of the whole logs to rounding. With ``workers`` (a local
+    Dask cluster of that many processes) or ``dask_address`` (an existing scheduler) each log
+    is reduced on a worker and only the triangles come back. ``input_delay="auto"`` streams the
+    logs again for every delay it tries.
+    """
+    from ropod_sysid.distributed import pool
+    from ropod_sysid.stream import DEFAULT_CHUNK, check_source, log_triangles
+
+    options = options or FitOptions()
+    if not paths:
+        raise InputError("no logs given; pass one or more log files")
+    paths = [str(p) for p in paths]
+    for p in paths:
+        check_source(p, platform)
+    say = progress or (lambda _msg: None)
+    with pool(workers, dask_address) as run:
+        def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
+            say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
+                + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
+            parts = run(log_triangles, paths, platform=platform, span=options.span,
+                        input_delay=delay, friction=options.friction,
+                        chunk=chunk or DEFAULT_CHUNK)
+            return [(p, tri, notes) for p, (tri, notes) in zip(paths, parts, strict=True)]
+
+        return _fit(reduce, platform, options)
+
+
+def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
+    """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay."""
+    model = PlatformModel(platform)
+    names = model.parameter_names(options.friction)
     delay = 0.0
     if options.input_delay == "auto":
         def cost(d: float) -> float:
-            sol, _ = fit_systems(systems_for(d), names, options)
+            sol, _ = fit_systems([tri for _, tri, _ in reduce(d)], names, options)
             return sol.sigma2
 
         res = scipy.optimize.minimize_scalar(cost, bounds=(0.0, options.max_delay),
@@ -178,12 +224,11 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
         delay = float(res.x)
     else:
         delay = float(options.input_delay)
-    systems = systems_for(delay)
+    reduced = reduce(delay)
+    systems = [tri for _, tri, _ in reduced]
     solution, weights = fit_systems(systems, names, options)
-    per_log = []
-    for log, s, w in zip(logs, systems, weights, strict=True):
-        per_log.append(LogFit(log.source, s.rows, w, s.rms(solution.values),
-                              notes.get(log.source, []), s))
+    per_log = [LogFit(source, tri.rows, w, tri.rms(solution.values), notes, tri)
+               for (source, tri, notes), w in zip(reduced, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log,
                        combined_rms(systems, solution.values), delay)
     if options.physical:

@@ -1,0 +1,681 @@
+"""Chunked identification: a log of any length in bounded memory, equal to the in-memory path.
+
+A log is read in chunks (:func:`ropod_sysid.io.csvlog.iter_csv_log` for CSV, also ``.csv.gz``)
+and goes through the steps of :func:`ropod_sysid.regressor.preprocess` and
+:func:`ropod_sysid.regressor.triangles` block by block:
+
+1. pivot angles (and a tracker heading) unwrapped, continued across chunks;
+2. the sample time from the head of the log (:func:`ropod_sysid.regressor.grid_step`); a log
+   whose steps all stay on it is used as sampled, a jittered one is put on the uniform grid
+   ``t0 + k dt`` by linear interpolation continued across chunks — the grid of the in-memory
+   path. A step off the grid found after the head restarts the pass in resampling mode;
+3. per block of kept samples [s, e): LOESS of the angles over the block with a halo of
+   2·(k−1)/2 + 2 samples (the smoother's half-window for the angles, two samples for the two
+   central differences, the half-window for A and b), odometry continued from the pose carried
+   from the previous block, central differences, A_ID,ext and b_ID, their LOESS, and the QR
+   triangles of the block's rows merged into the log's (TSQR).
+
+Every sample's value is computed from the same neighbours by the same formula as in one pass,
+so the triangles equal the in-memory ones to rounding (the FFT convolution of long windows is
+the only step whose rounding depends on the block). Memory is bounded by the chunk size plus
+the halo. The rotational weight needs the mean squares of b_ID, which the per-DOF triangles
+give after the pass (:meth:`Triangles.mean_square_b`).
+
+:func:`validate_source` does the same for validation: the disturbance observer's causal
+low-pass keeps its filter state across blocks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import math
+import os
+import queue
+import threading
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import signal as _signal
+
+from ropod_sysid import signals
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.log import Log
+from ropod_sysid.model import PlatformModel
+from ropod_sysid.params import DynamicParameters, Friction
+from ropod_sysid.platform import Platform
+from ropod_sysid.regressor import (
+    GRID_STEPS,
+    OdometryState,
+    Preprocessed,
+    Span,
+    block_triangles,
+    grid_step,
+    jitter_note,
+    odometry_from,
+    on_grid,
+    raw_system,
+    unwrap_from,
+)
+from ropod_sysid.solve import Triangles
+from ropod_sysid.validate import (
+    FORCE_THRESHOLD,
+    OBSERVER_CUTOFF_HZ,
+    TORQUE_THRESHOLD,
+    LogValidation,
+)
+
+DEFAULT_CHUNK = 50_000  # samples per chunk read and per block of kept samples
+Source = str | Path | Log
+
+
+# ---------------------------------------------------------------------------------------------
+# results
+
+
+@dataclass
+class ObserverStats:
+    """Running figures of the low-passed disturbance estimate F̂_b over the kept samples."""
+
+    sum_sq: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    max_abs: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    above_force: int = 0
+    above_torque: int = 0
+    count: int = 0
+    t: list[np.ndarray] = field(default_factory=list)
+    f_hat: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass
+class StreamResult:
+    """What one streamed log gives: its triangles, the reading notes and its grid."""
+
+    source: str
+    triangles: Triangles
+    notes: list[str]
+    samples: int  # samples on the grid, before trimming
+    dt: float
+    span_samples: int
+    observer: ObserverStats | None = field(default=None, repr=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# chunk sources
+
+
+def _iter_path(path: Path, platform: Platform, chunk: int) -> Iterator[Log]:
+    name = path.name.lower()
+    if name.endswith((".csv", ".csv.gz")):
+        if name.endswith(".csv"):
+            try:
+                from ropod_sysid.io import smartwheel
+            except ImportError:  # pragma: no cover - the smart-wheel layout is optional
+                smartwheel = None  # type: ignore[assignment]
+            if smartwheel is not None and smartwheel.is_smartwheel_csv(path):
+                # the robot's raw layout needs whole-log processing (frame checks, rates)
+                yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform), chunk)
+                return
+        from ropod_sysid.io.csvlog import iter_csv_log
+
+        yield from iter_csv_log(path, platform, chunk)
+        return
+    if name.endswith(".mcap"):
+        from ropod_sysid.io import mcaplog
+
+        iterate = getattr(mcaplog, "iter_mcap_log", None)
+        if iterate is not None:
+            yield from iterate(path, platform, chunk)
+        else:  # the MCAP reader has no chunked iteration: read it whole, process it in chunks
+            yield from _iter_log(mcaplog.read_mcap_log(path, platform), chunk)
+        return
+    suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
+    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+
+
+def _iter_log(log: Log, chunk: int) -> Iterator[Log]:
+    for start in range(0, max(log.n_samples, 1), chunk):
+        yield log.slice(start, start + chunk)
+
+
+def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK) -> Iterator[Log]:
+    """The samples of a log file (or an in-memory :class:`Log`) as consecutive logs of at most
+    ``chunk`` samples, read as they are needed."""
+    if isinstance(source, Log):
+        return _iter_log(source, chunk)
+    return _iter_path(Path(source), platform, chunk)
+
+
+def source_name(source: Source) -> str:
+    return source.source if isinstance(source, Log) else str(source)
+
+
+def _prefetch(chunks: Iterator[Log], depth: int = 2) -> Iterator[Log]:
+    """Read the next chunks in a background thread (Arrow parses without the GIL) while the
+    current one is processed; exceptions surface in order."""
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def work() -> None:
+        try:
+            for item in chunks:
+                while not stop.is_set():
+                    try:
+                        q.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put(done)
+        except BaseException as exc:  # handed to the consumer
+            q.put(exc)
+
+    thread = threading.Thread(target=work, daemon=True, name="ropod-sysid-reader")
+    thread.start()
+    try:
+        while True:
+            item = q.get()
+            if item is done:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        with contextlib.suppress(queue.Empty):
+            while True:
+                q.get_nowait()
+        thread.join()
+
+
+# ---------------------------------------------------------------------------------------------
+# BLAS threads
+
+
+def _blas_libraries() -> list[tuple[ctypes.CDLL, str, str]]:
+    """Loaded OpenBLAS builds with their thread-count setter and getter (Linux)."""
+    found = []
+    try:
+        with open("/proc/self/maps") as f:
+            paths = sorted({ln.split()[-1] for ln in f if "openblas" in ln.lower()})
+    except OSError:
+        return found
+    for path in paths:
+        if not os.path.exists(path):
+            continue
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        names = [(f"{prefix}_set_num_threads{tail}", f"{prefix}_get_num_threads{tail}")
+                 for prefix in ("scipy_openblas", "openblas") for tail in ("", "64_")]
+        for setter, getter in names:
+            if hasattr(lib, setter) and hasattr(lib, getter):
+                found.append((lib, setter, getter))
+                break
+    return found
+
+
+@contextlib.contextmanager
+def single_thread_blas() -> Iterator[None]:
+    """Run the block computations with one BLAS thread.
+
+    The blocks are tall and thin (QR leaves of 256 × 30, batched 3 × 3 solves); threaded
+    OpenBLAS gains nothing there and, on a busy machine, loses several-fold to spinning
+    threads. Best effort: without a recognisable OpenBLAS nothing changes.
+    """
+    saved = []
+    for lib, setter, getter in _blas_libraries():
+        try:
+            n = int(getattr(lib, getter)())
+            getattr(lib, setter)(1)
+            saved.append((lib, setter, n))
+        except (OSError, ValueError):  # pragma: no cover - a foreign build
+            continue
+    try:
+        yield
+    finally:
+        for lib, setter, n in saved:
+            getattr(lib, setter)(n)
+
+
+# ---------------------------------------------------------------------------------------------
+# the pass
+
+
+class _OffGrid(Exception):
+    """A step off the sample grid found after the head: the pass restarts, resampling."""
+
+
+@dataclass
+class _Samples:
+    """Consecutive grid samples: t (m,), delta (m, n), phi (m, n, 2), current (m, n, 2),
+    pose (m, 3) or None."""
+
+    t: np.ndarray
+    delta: np.ndarray
+    phi: np.ndarray
+    current: np.ndarray
+    pose: np.ndarray | None
+
+    def __len__(self) -> int:
+        return self.t.shape[0]
+
+    def take(self, start: int, stop: int) -> _Samples:
+        pose = None if self.pose is None else self.pose[start:stop]
+        return _Samples(self.t[start:stop], self.delta[start:stop], self.phi[start:stop],
+                        self.current[start:stop], pose)
+
+    @staticmethod
+    def join(parts: list[_Samples]) -> _Samples:
+        if len(parts) == 1:
+            return parts[0]
+        pose = None if parts[0].pose is None else np.concatenate([p.pose for p in parts])
+        return _Samples(np.concatenate([p.t for p in parts]),
+                        np.concatenate([p.delta for p in parts]),
+                        np.concatenate([p.phi for p in parts]),
+                        np.concatenate([p.current for p in parts]), pose)
+
+
+class _Grid:
+    """Steps 1–2: unwrapping and the uniform grid, continued from chunk to chunk."""
+
+    def __init__(self, source: str, resample: bool, sink: _Blocks) -> None:
+        self.source = source
+        self.resample = resample
+        self.sink = sink
+        self.head: list[_Samples] = []
+        self.dt: float | None = None
+        self.t0 = 0.0
+        self.tail: _Samples | None = None  # last two samples (steps, interpolation brackets)
+        self.next_k = 0  # next grid index to emit (resampling)
+        self.max_step = -np.inf
+        self.min_step = np.inf
+        self.unwrap_delta: _Unwrap | None = None
+        self.unwrap_theta: _Unwrap | None = None
+        self.unwrap_grid: _Unwrap | None = None
+        self.has_pose: bool | None = None
+
+    def push(self, log: Log) -> None:
+        if log.n_samples == 0:
+            return
+        if self.has_pose is None:
+            self.has_pose = log.pose is not None
+        elif self.has_pose != (log.pose is not None):
+            raise InputError(f"{self.source}: the tracker pose is given on part of the log "
+                             "only; give x_b, y_b, theta_b on every sample or on none")
+        delta, self.unwrap_delta = _unwrap(log.delta, self.unwrap_delta)
+        pose = None
+        if log.pose is not None:
+            theta, self.unwrap_theta = _unwrap(log.pose[:, 2], self.unwrap_theta)
+            pose = np.column_stack([log.pose[:, :2], theta])
+        raw = _Samples(np.asarray(log.t, float), delta, np.asarray(log.phi, float),
+                       np.asarray(log.current, float), pose)
+        if self.dt is None:
+            self.head.append(raw)
+            if sum(len(h) for h in self.head) > GRID_STEPS:
+                self._start(final=False)
+            return
+        self._emit(raw, final=False)
+
+    def _start(self, final: bool) -> None:
+        head = _Samples.join(self.head)
+        self.head = []
+        self.dt = grid_step(head.t)
+        self.t0 = float(head.t[0])
+        if not self.resample and not on_grid(np.diff(head.t), self.dt):
+            self.resample = True
+        self.sink.start(self.dt)
+        self._emit(head, final)
+
+    def _emit(self, raw: _Samples, final: bool) -> None:
+        src = raw if self.tail is None else _Samples.join([self.tail, raw])
+        lead = 0 if self.tail is None else len(self.tail) - 1
+        steps = np.diff(src.t[lead:])
+        if steps.size:
+            if not steps.min() > 0:
+                raise InputError(f"{self.source}: time does not strictly increase; sort the "
+                                 "samples or remove repeated ones")
+            self.max_step = max(self.max_step, float(steps.max()))
+            self.min_step = min(self.min_step, float(steps.min()))
+        if not self.resample:
+            if not on_grid(steps, self.dt):  # type: ignore[arg-type]
+                raise _OffGrid
+            self.sink.push(raw)
+        else:
+            self._resample(src, final)
+        self.tail = src.take(max(len(src) - 2, 0), len(src))
+
+    def _resample(self, src: _Samples, final: bool) -> None:
+        """Grid points t0 + k dt among the samples seen so far, by the formula of
+        :func:`ropod_sysid.signals.resample_uniform` on the whole log (the last point, at the
+        end, clipped to the last sample time)."""
+        t, dt = src.t, self.dt
+        assert dt is not None
+        if final:
+            m = int(np.floor((t[-1] - self.t0) / dt * (1 + 1e-12) + 1e-9)) + 1
+        else:
+            m = int(np.floor((t[-1] - self.t0) / dt)) + 2
+        tk = self.t0 + dt * np.arange(self.next_k, max(m, self.next_k), dtype=float)
+        tk = np.minimum(tk, t[-1]) if final else tk[tk < t[-1]]
+        if not tk.size:
+            return
+        if len(t) < 2:
+            raise InputError(f"{self.source}: only one sample; a log needs more")
+        idx = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, len(t) - 2)
+        frac = (tk - t[idx]) / (t[idx + 1] - t[idx])
+
+        def at(y: np.ndarray) -> np.ndarray:
+            f = frac.reshape((-1,) + (1,) * (y.ndim - 1))
+            return y[idx] + f * (y[idx + 1] - y[idx])
+
+        pose = None
+        if src.pose is not None:
+            pose = at(src.pose)
+            pose[:, 2], self.unwrap_grid = _unwrap(pose[:, 2], self.unwrap_grid)
+        self.sink.push(_Samples(tk, at(src.delta), at(src.phi), at(src.current), pose))
+        self.next_k += tk.size
+
+    def finish(self) -> list[str]:
+        if self.dt is None:
+            if not self.head:
+                raise InputError(f"{self.source}: the log has no samples")
+            self._start(final=True)
+        elif self.resample:
+            assert self.tail is not None
+            self._resample(self.tail, final=True)
+        notes = []
+        if self.resample:
+            notes.append(jitter_note(self.source, self.max_step, self.min_step,
+                                     self.dt))  # type: ignore[arg-type]
+        return notes
+
+
+@dataclass
+class _Unwrap:
+    """Where np.unwrap of a signal stands after a piece: last raw sample, its correction."""
+
+    last: np.ndarray
+    corr: np.ndarray
+
+
+def _unwrap(p: np.ndarray, state: _Unwrap | None) -> tuple[np.ndarray, _Unwrap]:
+    """np.unwrap along axis 0 of the next piece of a signal (bit-identical to one call)."""
+    p = np.asarray(p, float)
+    if state is None:
+        up, corr = unwrap_from(p)
+    else:
+        up, corr = unwrap_from(np.concatenate([state.last[None], p]), state.corr)
+        up, corr = up[1:], corr[1:]
+    return up, _Unwrap(p[-1].copy(), corr[-1].copy())
+
+
+class _Blocks:
+    """Step 3: blocks of kept samples with their halo, through to the merged triangles."""
+
+    def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
+                 chunk: int, source: str, params: DynamicParameters | None,
+                 keep_series: bool) -> None:
+        self.platform = platform
+        self.model = PlatformModel(platform)
+        self.span = span
+        self.delay = float(input_delay)
+        self.friction = friction
+        self.block = max(int(chunk), 1)
+        self.source = source
+        self.params = params
+        self.keep_series = keep_series
+        self.parts: list[_Samples] = []
+        self.g0 = 0  # index of the first buffered sample
+        self.avail = 0  # samples received
+        self.tri: Triangles | None = None
+        self.odo: OdometryState | None = None
+        self.obs = ObserverStats() if params is not None else None
+        self.zi: np.ndarray | None = None
+
+    def start(self, dt: float) -> None:
+        self.dt = dt
+        self.k = self.span.samples(dt, 0)
+        self.c = (self.k - 1) // 2
+        self.trim = self.k
+        self.s = self.trim  # next kept sample to reduce
+        self.lookback = math.ceil(self.delay / dt) + 2 if self.delay else 0
+        if self.params is not None:
+            self.sos = _signal.butter(2, float(OBSERVER_CUTOFF_HZ), btype="low", fs=1.0 / dt,
+                                      output="sos")
+            self.m_params = self.params.vector(self.platform.unit_names, "per-wheel")
+
+    def push(self, samples: _Samples) -> None:
+        if len(samples):
+            self.parts.append(samples)
+            self.avail += len(samples)
+            self._drain(None)
+
+    def finish(self) -> tuple[Triangles, ObserverStats | None, int]:
+        n = self.avail
+        k = self.k
+        if n < 2 * self.trim + k:
+            raise InputError(
+                f"{self.source}: {n} samples are too few for a smoother span of {k} samples "
+                f"({k * self.dt:.3g} s); record a longer run or use a shorter --span")
+        self._drain(n)
+        if self.tri is None:  # pragma: no cover - excluded by the length check
+            raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
+        return self.tri, self.obs, n
+
+    def _drain(self, n: int | None) -> None:
+        c = self.c
+        while True:
+            s = self.s
+            if n is not None:
+                end = n - self.trim
+                if s >= end:
+                    return
+                e = min(s + self.block, end)
+                last = e == end
+            else:
+                e = s + self.block
+                if e + 2 * c + 2 > self.avail:
+                    return
+                last = False
+            self._reduce(s, e, last, n)
+            self.s = e
+            # keep what the next block reaches back to
+            keep = max(0, min(e - 2 * c - 2, e - c - self.lookback))
+            self._drop_before(keep)
+
+    def _window(self, r0: int, r1: int) -> _Samples:
+        buf = _Samples.join(self.parts)
+        self.parts = [buf]
+        return buf.take(r0 - self.g0, r1 - self.g0)
+
+    def _drop_before(self, index: int) -> None:
+        if index <= self.g0:
+            return
+        buf = _Samples.join(self.parts)
+        cut = index - self.g0
+        self.parts = [buf.take(cut, len(buf))]
+        self.g0 = index
+
+    def _reduce(self, s: int, e: int, last: bool, n: int | None) -> None:
+        """Reduce kept samples [s, e) to triangles (and observer figures)."""
+        c, k, dt = self.c, self.k, self.dt
+        first = s == self.trim
+        qa = 0 if first else s - c - 2  # first sample of the pose
+        r0 = max(0, min(qa - c, s - c - self.lookback))  # first raw sample
+        r1 = n if last else e + 2 * c + 2
+        assert r1 is not None
+        w = self._window(r0, r1)
+        q1 = r1 if last else e + c + 2
+        i0, i1 = qa - r0, q1 - r0
+        delta = signals.loess(w.delta, k)[i0:i1]
+        phi = signals.loess(w.phi, k)[i0:i1]
+        if w.pose is None:
+            q, corr = odometry_from(self.platform, delta, phi, None if first else self.odo)
+            if not last:
+                j = (e - c - 2) - qa  # the next block's first pose sample
+                self.odo = OdometryState(q[j].copy(), corr[j].copy())
+        else:
+            q = signals.loess(w.pose, k)[i0:i1]
+        qd = signals.central_difference(q, dt)
+        qdd = signals.central_difference(qd, dt)
+        delta_dot = signals.central_difference(delta, dt)
+        phi_dot = signals.central_difference(phi, dt)
+        tau = self.platform.torque_constant * w.current
+        if self.delay:
+            flat = tau.reshape(len(w), -1)
+            tau = np.stack([np.interp(w.t - self.delay, w.t, flat[:, j])
+                            for j in range(flat.shape[1])], axis=1).reshape(tau.shape)
+        # samples [pa, pb) are preprocessed: A and b need [s - c, e + c); the observer, every
+        # sample from 0 to n
+        pa, pb = s - c, e + c
+        oa, ob = (0 if first else s), (r1 if last else e)
+        if self.obs is not None:
+            pa, pb = min(pa, oa), max(pb, ob)
+        jq = slice(pa - qa, pb - qa)
+        jr = slice(pa - r0, pb - r0)
+        pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
+                           phi_dot[jq], tau[jr], self.source, k, dt, [], 0)
+        a, b = raw_system(self.model, pre.window(s - c - pa, e + c - pa), self.friction)
+        a = signals.loess(a, k)[c: c + e - s]
+        b = signals.loess(b, k)[c: c + e - s]
+        block = block_triangles(a, b, self.source)
+        self.tri = block if self.tri is None else self.tri.merge(block)
+        if self.obs is not None:
+            self._observe(pre.window(oa - pa, ob - pa), oa, ob, last)
+
+    def _observe(self, pre: Preprocessed, oa: int, ob: int, last: bool) -> None:
+        """The disturbance observer (eq. 40, causal 10 Hz low-pass) on samples [oa, ob)."""
+        assert self.obs is not None and self.params is not None
+        st = self.model.state(pre.q, pre.qd, pre.delta, pre.delta_dot)
+        f_b = self.model.disturbance(st, self.params, pre.qdd, pre.tau)
+        if self.zi is None:
+            self.zi = np.zeros((self.sos.shape[0], 2, f_b.shape[1]))
+        f_hat, self.zi = _signal.sosfilt(self.sos, f_b, axis=0, zi=self.zi)
+        lo = max(oa, self.trim) - oa
+        hi = (ob - self.trim if last else ob) - oa
+        f_hat = f_hat[lo:hi]
+        obs = self.obs
+        obs.sum_sq += (f_hat ** 2).sum(axis=0)
+        if len(f_hat):
+            obs.max_abs = np.maximum(obs.max_abs, np.abs(f_hat).max(axis=0))
+        obs.above_force += int(np.count_nonzero(np.hypot(f_hat[:, 0], f_hat[:, 1])
+                                                > FORCE_THRESHOLD))
+        obs.above_torque += int(np.count_nonzero(np.abs(f_hat[:, 2]) > TORQUE_THRESHOLD))
+        obs.count += len(f_hat)
+        if self.keep_series:
+            obs.t.append(pre.t[lo:hi].copy())
+            obs.f_hat.append(f_hat.copy())
+
+
+# ---------------------------------------------------------------------------------------------
+# entry points
+
+
+def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
+          friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
+          resample: bool, prefetch: bool) -> StreamResult:
+    name = source_name(source)
+    blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params, keep_series)
+    grid = _Grid(name, resample, blocks)
+    notes: list[str] = []
+    chunks = iter_chunks(source, platform, chunk)
+    if prefetch and not isinstance(source, Log):
+        chunks = _prefetch(chunks)
+    seen = False
+    for log in chunks:
+        if not seen:
+            notes.extend(log.notes)
+            seen = True
+        grid.push(log)
+    notes += grid.finish()
+    tri, obs, n = blocks.finish()
+    return StreamResult(name, tri, notes, n, blocks.dt, blocks.k, obs)
+
+
+def stream_log(source: Source, platform: Platform, span: Span | None = None,
+               input_delay: float = 0.0, friction: Friction = "per-wheel",
+               chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
+               keep_series: bool = False, prefetch: bool = True) -> StreamResult:
+    """One pass over a log (a file, or an in-memory :class:`Log`) in chunks of ``chunk``
+    samples: its QR triangles per DOF, equal to ``triangles(model, preprocess(log, …))`` to
+    rounding; with ``params`` also the disturbance observer's figures (``keep_series``: and
+    its low-passed series, O(N) memory).
+
+    ``prefetch`` reads the next chunk in a background thread while one is processed.
+    """
+    span = span or Span.parse(None)
+    if chunk < 1:
+        raise InputError(f"chunk size {chunk}: must be a positive number of samples")
+    with single_thread_blas():
+        try:
+            return _pass(source, platform, span, input_delay, friction, chunk, params,
+                         keep_series, False, prefetch)
+        except _OffGrid:
+            # a step off the grid after the head: the log is jittered after all; again, on
+            # the uniform grid from the start
+            return _pass(source, platform, span, input_delay, friction, chunk, params,
+                         keep_series, True, prefetch)
+
+
+def log_triangles(source: Source, platform: Platform, span: Span | None = None,
+                  input_delay: float = 0.0, friction: Friction = "per-wheel",
+                  chunk: int = DEFAULT_CHUNK) -> tuple[Triangles, list[str]]:
+    """A log's triangles and reading notes (the unit of work of a fit; runs on Dask workers)."""
+    res = stream_log(source, platform, span, input_delay, friction, chunk)
+    return res.triangles, res.notes
+
+
+def validate_source(source: Source, platform: Platform, params: DynamicParameters,
+                    span: Span | None = None, input_delay: float = 0.0,
+                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False) -> LogValidation:
+    """:func:`ropod_sysid.validate.validate_log` of a log read in chunks. The observer series
+    (``t``, ``f_hat``) are kept only with ``keep_series`` (they grow with the log)."""
+    res = stream_log(source, platform, span, input_delay, "per-wheel", chunk, params,
+                     keep_series)
+    obs = res.observer
+    assert obs is not None
+    m = params.vector(platform.unit_names, "per-wheel")
+    count = max(obs.count, 1)
+    keys = ("F_bx", "F_by", "T_bz")
+    t = np.concatenate(obs.t) if obs.t else np.zeros(0)
+    f_hat = np.concatenate(obs.f_hat) if obs.f_hat else np.zeros((0, 3))
+    return LogValidation(
+        source=res.source, samples=res.triangles.rows, rms=res.triangles.rms(m),
+        observer_rms={k: float(np.sqrt(obs.sum_sq[j] / count)) for j, k in enumerate(keys)},
+        observer_max={k: float(obs.max_abs[j]) for j, k in enumerate(keys)},
+        share_above={"force": obs.above_force / count, "torque": obs.above_torque / count},
+        t=t, f_hat=f_hat)
+
+
+def check_source(source: Source, platform: Platform) -> None:
+    """Cheap checks of a log before a long pass: the file exists, its format is known and, for
+    a contract CSV, the header names the platform's columns (one-line :class:`InputError`)."""
+    if isinstance(source, Log):
+        return
+    path = Path(source)
+    name = path.name.lower()
+    if not name.endswith((".csv", ".csv.gz", ".mcap")):
+        suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
+        raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+    if name.endswith((".csv", ".csv.gz")):
+        from ropod_sysid.io.csvlog import check_csv_header
+
+        check_csv_header(path, platform)
+
+
+def validate_sources(sources: list[Source], platform: Platform, params: DynamicParameters,
+                     span: Span | None = None, input_delay: float = 0.0,
+                     chunk: int = DEFAULT_CHUNK, workers: int | None = None,
+                     dask_address: str | None = None) -> list[LogValidation]:
+    """:func:`validate_source` for each log, on Dask with ``workers`` or ``dask_address``."""
+    from ropod_sysid.distributed import pool
+
+    for src in sources:
+        check_source(src, platform)
+    with pool(workers, dask_address) as run:
+        return run(validate_source, sources, platform=platform, params=params, span=span,
+                   input_delay=input_delay, chunk=chunk)
