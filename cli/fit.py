@@ -6,13 +6,21 @@ import click
 
 from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, fit_logs
+from ropod_sysid.fit import FitOptions, fit_files
 from ropod_sysid.io import read_log
 from ropod_sysid.io.paramfile import write_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
 from ropod_sysid.solve import RCOND
 from ropod_sysid.summary import format_fit
+
+workers_option = click.option(
+    "--workers", type=int, default=None, metavar="N",
+    help="Reduce the logs in parallel on a local Dask cluster of N worker processes "
+         "(needs: pip install 'ropod-sysid[dask]').")
+dask_option = click.option(
+    "--dask", "dask_address", default=None, metavar="ADDRESS",
+    help="Reduce the logs on the workers of a running Dask scheduler, e.g. tcp://host:8786.")
 
 
 def parse_fix(items: tuple[str, ...]) -> dict[str, float]:
@@ -89,22 +97,33 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
               help="With --report: a parameter file shown side by side.")
 @click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
               help="With --report: validation log (repeatable).")
+@workers_option
+@dask_option
 @quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
             span: str | None, fix: tuple[str, ...], weight_rotation: str, physical: bool,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
-            validate_logs: tuple[str, ...], quiet: bool) -> None:
-    """Fit the dynamic parameters to LOGS (stacked) and write the parameter file."""
+            validate_logs: tuple[str, ...], workers: int | None, dask_address: str | None,
+            quiet: bool) -> None:
+    """Fit the dynamic parameters to LOGS (stacked) and write the parameter file.
+
+    Each log is read and reduced in chunks, so its length is not limited by memory; with
+    --workers or --dask the logs are reduced in parallel on Dask workers.
+    """
     platform = load_platform(platform_path)
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond)
-    loaded = [read_log(p, platform) for p in logs]
 
     def say(msg: str) -> None:
         if not quiet:
             click.echo(msg, err=True)
 
-    result = fit_logs(loaded, platform, options)
+    result = fit_files(list(logs), platform, options, workers=workers,
+                       dask_address=dask_address)
+    loaded = None
+    if report_path is not None:
+        # the report plots every sample: it needs the logs in memory
+        loaded = [read_log(p, platform) for p in logs]
     write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
     if report_path is not None:
         from ropod_sysid.report import write_fit_report
