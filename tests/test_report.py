@@ -238,6 +238,10 @@ def test_rebuilt_from_the_parameter_file_equals_the_fit(sim, files):
     assert rebuilt.solution.condition_number == pytest.approx(result.solution.condition_number)
     np.testing.assert_allclose(rebuilt.solution.singular_values,
                                result.solution.singular_values, rtol=1e-9)
+    # on other logs: the file's values, the residual of those logs, and a note saying so
+    other, notes = result_from_parameter_file(platform, logs[2:], pfile)
+    np.testing.assert_allclose(other.solution.values, result.solution.values, rtol=1e-12)
+    assert any("on these logs" in n for n in notes), notes
 
 
 def test_written_atomically_without_compare_or_validation(sim, tmp_path):

@@ -138,6 +138,15 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     per_log = [LogFit(log.source, s.rows, w, s.rms(m), n, s)
                for log, s, w, n in zip(logs, systems, weights, log_notes, strict=True)]
     result = FitResult(platform, options, solution, per_log, combined_rms(systems, m), delay)
+    if pfile.extras.get("physical") is True:
+        notes.append("the values are those of a physically consistent (bounded) fit")
+    file_rms = [pfile.rms.get(k, math.nan) for k in ("translation", "rotation")]
+    here = [result.rms["translation"], result.rms["rotation"]]
+    if all(math.isfinite(v) for v in file_rms) and any(
+            abs(a - b) > 0.01 * max(abs(b), 1e-12) for a, b in zip(here, file_rms, strict=True)):
+        notes.append(f"the parameter file reports an RMS residual of {file_rms[0]:.4g} N / "
+                     f"{file_rms[1]:.4g} N m on the logs it was fitted to; on these logs it is "
+                     f"{here[0]:.4g} N / {here[1]:.4g} N m")
     return result, notes
 
 
