@@ -73,3 +73,15 @@ def test_not_yaml_and_missing_file(tmp_path):
     p.write_text("!!python/object/apply:os.system ['echo unsafe']\n")
     with pytest.raises(InputError):  # never loaded unsafely
         load_platform(p)
+
+
+def test_written_files_get_ordinary_permissions(tmp_path):
+    import os
+    import stat
+
+    save_platform(ropod_platform(), tmp_path / "p.yaml")
+    umask = os.umask(0)
+    os.umask(umask)
+    mode = stat.S_IMODE((tmp_path / "p.yaml").stat().st_mode)
+    assert mode == 0o666 & ~umask
+    assert [p.name for p in tmp_path.iterdir()] == ["p.yaml"]  # no temporary left behind
