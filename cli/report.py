@@ -14,7 +14,7 @@ from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
 
 
-@click.command("report")
+@click.command("report", short_help="Write the HTML report of a parameter file on logs (no refit).")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @platform_option
 @click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
