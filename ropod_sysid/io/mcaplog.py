@@ -26,6 +26,8 @@ refused with a one-line :class:`InputError`.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import struct
@@ -36,7 +38,7 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError, RecordLengthLimitExceeded
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from mcap.writer import CompressionType
@@ -332,10 +334,11 @@ def _chunk_records(chunk: Chunk) -> list[Any]:
 
 
 def _take(scan: McapScan, record: Any) -> None:
+    # the first copy counts: the summary repeats schemas and channels, and is read last
     if isinstance(record, Schema):
-        scan.schemas[record.id] = record
+        scan.schemas.setdefault(record.id, record)
     elif isinstance(record, Channel):
-        scan.channels[record.id] = record
+        scan.channels.setdefault(record.id, record)
     elif isinstance(record, Message):
         scan.messages.setdefault(record.channel_id, []).append(record)
 
@@ -346,6 +349,9 @@ def _what(exc: BaseException, good_end: int, at_eof: bool, boundary: bool) -> st
         return f"the file ends after byte {good_end}, before its end records — truncated"
     if at_eof or isinstance(exc, EndOfFile):
         return f"the file ends in the middle of a record after byte {good_end} — truncated"
+    if isinstance(exc, RecordLengthLimitExceeded):
+        return (f"the record after byte {good_end} runs past the end of the file — truncated, "
+                "or a corrupt record length")
     if isinstance(exc, CRCValidationError):
         kind = type(exc.record).__name__
         return (f"CRC mismatch of the compressed chunk after byte {good_end}" if kind == "Chunk"
@@ -480,9 +486,10 @@ def _decoder(stream: Stream, where: str) -> Any:
     from mcap_ros2._dynamic import generate_dynamic
 
     try:
-        types = generate_dynamic(schema.name, schema.data.decode())
+        with contextlib.redirect_stderr(io.StringIO()):     # the parser prints its complaints
+            types = generate_dynamic(schema.name, schema.data.decode())
         return types[schema.name]
-    except READ_ERRORS + (SyntaxError,) as exc:
+    except Exception as exc:   # noqa: BLE001 - the vendored rosidl parser has its own errors
         raise InputError(f"{where}: the ros2msg schema {schema.name!r} of "
                          f"{stream.channel.topic} cannot be parsed ({type(exc).__name__})") \
             from None

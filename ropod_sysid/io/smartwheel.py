@@ -330,9 +330,9 @@ def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | Non
                 parts.append(f"{idx.size} {label}: frames {shown}{more}")
         notes.append(f"{where}: dropped {n_bad} of {n_frames} smart-wheel frames — "
                      f"{'; '.join(parts)} (frame numbers count from 0 in file order)")
-        if warn:
-            for note in notes:
-                warnings.warn(note, stacklevel=2)
+    if warn:
+        for note in notes:
+            warnings.warn(note, stacklevel=2)
     return Log(t=t, units=platform.unit_names, delta=delta, phi=phi, current=cur, pose=None,
                source=where, notes=notes)
 
@@ -450,7 +450,8 @@ CORRUPT_KINDS = ("zeroed", "voltage", "time")
 def raw_frames(log: Log, platform: Platform, *, t0_ns: int = DEFAULT_EPOCH_NS,
                wrap: str | None = None, wrap_pivot: str | None = "pi",
                corrupt: int | Mapping[str, int] = 0, voltage: float = 24.0,
-               seed: int = 0) -> tuple[dict[str, np.ndarray], np.ndarray]:
+               seed: int = 0, decimals: int | None = None,
+               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The smart-wheel fields of ``log`` as the drives would send them: field → (N', n) arrays
     and the (N',) receive times [ns]; see :func:`write_smartwheel` for the options."""
     units = list(platform.unit_names)
@@ -486,6 +487,9 @@ def raw_frames(log: Log, platform: Platform, *, t0_ns: int = DEFAULT_EPOCH_NS,
             f["velocity_pivot"][:, i] = np.gradient(pivot, t)
         f[f"current_{lm}_q"][:, i] = u.sign_left * log.current[:, i, 0]
         f[f"current_{rm}_q"][:, i] = u.sign_right * log.current[:, i, 1]
+    if decimals is not None:
+        for name in FLOAT_FIELDS:
+            f[name] = np.round(f[name], decimals)
     recv = ts[:, 0].copy()
 
     counts = ({k: int(corrupt) for k in CORRUPT_KINDS} if isinstance(corrupt, int)
@@ -528,7 +532,7 @@ def write_smartwheel(log: Log, path: str | Path, platform: Platform, *,
                      encoding: str = "json", topic: str = SW_TOPIC,
                      t0_ns: int = DEFAULT_EPOCH_NS, wrap: str | None = None,
                      wrap_pivot: str | None = "pi", corrupt: int | Mapping[str, int] = 0,
-                     voltage: float = 24.0, seed: int = 0) -> int:
+                     voltage: float = 24.0, seed: int = 0, decimals: int | None = None) -> int:
     """Write ``log`` in the smart-wheel layout (.mcap: ``encoding`` json or ros2; .csv), atomically.
 
     The inverse of reading: the per-unit settings of ``platform`` say which motor is the left
@@ -539,7 +543,8 @@ def write_smartwheel(log: Log, path: str | Path, platform: Platform, *,
     as the drive sends them); ``wrap_pivot`` the same for the pivot encoder (the drive wraps it to
     [−π, π)). ``corrupt`` inserts corrupt frames — an int for that many of each kind, or
     ``{"zeroed": k, "voltage": k, "time": k}`` — at random places (``seed``), which the reader
-    drops, leaving the original log. Returns the number of frames written.
+    drops, leaving the original log. ``decimals`` rounds the float fields (smaller files; None
+    writes them exactly). Returns the number of frames written.
     """
     suffix = Path(path).suffix.lower()
     if suffix not in (".csv", ".mcap"):
@@ -547,7 +552,7 @@ def write_smartwheel(log: Log, path: str | Path, platform: Platform, *,
     if suffix == ".mcap" and encoding not in ("json", "ros2"):
         raise InputError(f"{path}: unknown MCAP encoding {encoding!r}; use json or ros2")
     f, recv = raw_frames(log, platform, t0_ns=t0_ns, wrap=wrap, wrap_pivot=wrap_pivot,
-                         corrupt=corrupt, voltage=voltage, seed=seed)
+                         corrupt=corrupt, voltage=voltage, seed=seed, decimals=decimals)
     n_frames = int(recv.size)
     with atomic_path(path) as tmp:
         if suffix == ".csv":
