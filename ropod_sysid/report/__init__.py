@@ -19,7 +19,6 @@ from __future__ import annotations
 import base64
 import dataclasses
 import math
-import os
 from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -31,7 +30,7 @@ import numpy as np
 from ropod_sysid import __version__
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, FitResult, LogFit, fit_systems
-from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file
 from ropod_sysid.model import PlatformModel
@@ -454,14 +453,6 @@ def write_fit_report(result: FitResult, logs: Sequence[Log], path: str | Path, *
     html = render_fit_report(result, logs, compare=compare, validation_logs=validation_logs,
                              **options)
     try:
-        with atomic_path(path) as tmp:
-            tmp.write_text(html, encoding="utf-8")
-            tmp.chmod(0o666 & ~_umask())  # a document to share (the temporary file is 0600)
+        atomic_write_text(path, html)
     except OSError as exc:
         raise InputError(f"{path}: cannot write the report ({exc.strerror or exc})") from None
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
