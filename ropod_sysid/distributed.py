@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from ropod_sysid.errors import InputError
 
 INSTALL_HINT = "pip install 'ropod-sysid[dask]'"
+CONNECT_TIMEOUT = "20s"  # to reach an existing scheduler
+PROCESSES = True  # --workers: worker processes (False: threads of this process, for tests)
 Run = Callable[..., list]
 
 
@@ -40,7 +43,7 @@ class DaskPool:
     (``address``); :meth:`map` runs one task per item and gathers the results in order."""
 
     def __init__(self, workers: int | None = None, address: str | None = None,
-                 processes: bool = True) -> None:
+                 processes: bool | None = None) -> None:
         if workers is not None and address is not None:
             raise InputError("--workers and --dask: give one of them (--dask uses the workers "
                              "of the existing cluster)")
@@ -50,7 +53,7 @@ class DaskPool:
             raise InputError(f"--workers {workers}: give a positive number of worker processes")
         self.workers = workers
         self.address = address
-        self.processes = processes
+        self.processes = PROCESSES if processes is None else processes
         self.cluster: Any = None
         self.client: Any = None
 
@@ -58,17 +61,22 @@ class DaskPool:
         distributed = _dask()
         try:
             if self.address is not None:
-                self.client = distributed.Client(self.address, timeout="20s")
+                self.client = distributed.Client(self.address, timeout=CONNECT_TIMEOUT)
             else:
-                self.cluster = distributed.LocalCluster(
-                    n_workers=self.workers, threads_per_worker=1, processes=self.processes,
-                    dashboard_address=None, silence_logs=logging.ERROR)
+                with warnings.catch_warnings():
+                    # the scheduler's HTTP endpoint moves to a free port if 8787 is taken
+                    warnings.filterwarnings("ignore", message=r"Port \d+ is already in use")
+                    self.cluster = distributed.LocalCluster(
+                        n_workers=self.workers, threads_per_worker=1, processes=self.processes,
+                        dashboard_address=None, silence_logs=logging.ERROR)
                 self.client = distributed.Client(self.cluster)
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, RuntimeError) as exc:
             self.close()
             what = f"--dask {self.address}" if self.address else f"--workers {self.workers}"
-            raise InputError(f"{what}: cannot reach the Dask scheduler ({exc}); check the "
-                             "address, e.g. tcp://host:8786") from None
+            hint = ("check the address, e.g. tcp://host:8786" if self.address else
+                    "the worker processes did not start")
+            raise InputError(f"{what}: cannot start or reach the Dask cluster ({exc}); "
+                             f"{hint}") from None
         return self
 
     def map(self, func: Callable[..., Any], items: Sequence[Any], **kwargs: Any) -> list:
@@ -96,7 +104,7 @@ class DaskPool:
 
 @contextlib.contextmanager
 def pool(workers: int | None = None, address: str | None = None,
-         processes: bool = True) -> Iterator[Run]:
+         processes: bool | None = None) -> Iterator[Run]:
     """A ``run(func, items, **kwargs) -> list`` for the duration of the block: on Dask with
     ``workers`` or ``address``, else serial. One cluster serves every call (e.g. every delay
     that ``--input-delay auto`` tries)."""
