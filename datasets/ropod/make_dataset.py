@@ -3,8 +3,9 @@
     python datasets/ropod/make_dataset.py
 
 Writes, beside this script: ``platform.yaml`` (the data contract's ropod), ``truth.json`` (the
-parameters the simulation used), ``trajectory/`` (the setpoint CSVs of the four variants,
-thesis Sec. VI-A) and ``original.csv.gz`` … ``mirrored_negated.csv.gz``: 100 Hz logs with
+parameters the simulation used) and ``original.csv.gz`` … ``mirrored_negated.csv.gz``, the
+four variants of thesis Sec. VI-A (their setpoints are ``ropod-sysid trajectory typical
+--duration 60 --platform platform.yaml --out DIR``): 100 Hz logs with
 2¹⁴-count encoders, 30 mA current noise and 0.5 ms timestamp jitter. Values are rounded far
 below the sensor resolution (angles to 1e-7 rad, currents to 1e-5 A, time to 1 µs) and
 gzip-compressed, which keeps the set under 5 MB. Takes a few minutes (RK4 at 1 kHz).
@@ -36,9 +37,6 @@ def main() -> None:
     (HERE / "truth.json").write_text(
         json.dumps(truth.to_mapping(platform.unit_names), indent=2) + "\n")
     runs = variants(typical(duration=60.0, platform=platform, seed=0))
-    (HERE / "trajectory").mkdir(exist_ok=True)
-    for name, traj in runs.items():
-        traj.write_csv(HERE / "trajectory" / f"{name}.csv")
     results = simulate(platform, truth, [tr.to_setpoints() for tr in runs.values()],
                        rate=RATE, sensors=SENSORS, quiet=False)
     for name, res in zip(runs, results, strict=True):

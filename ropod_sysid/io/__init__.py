@@ -11,15 +11,25 @@ from ropod_sysid.platform import Platform
 LOG_SUFFIXES = (".csv", ".csv.gz", ".mcap")
 
 
+def log_format(path: str | Path) -> str:
+    """The log format a file name asks for: ``.csv`` (also ``.csv.gz``) or ``.mcap``."""
+    name = Path(path).name.lower()
+    if name.endswith(".csv.gz"):
+        return ".csv"
+    suffix = Path(name).suffix
+    if suffix in (".csv", ".mcap"):
+        return suffix
+    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+
+
 def read_log(path: str | Path, platform: Platform) -> Log:
-    """Read a log in any supported format, chosen by the file suffix (.csv, .mcap).
+    """Read a log in any supported format, chosen by the file suffix (.csv, .csv.gz, .mcap).
 
     A CSV whose header names ``sensors.0.`` columns is read in the smart-wheel layout
     (:mod:`ropod_sysid.io.smartwheel`); an MCAP file's layout is recognised from its channels.
     """
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".csv":
+    if log_format(path) == ".csv":
         from ropod_sysid.io.smartwheel import is_smartwheel_csv, read_smartwheel_csv
 
         if is_smartwheel_csv(path):
@@ -27,28 +37,22 @@ def read_log(path: str | Path, platform: Platform) -> Log:
         from ropod_sysid.io.csvlog import read_csv_log
 
         return read_csv_log(path, platform)
-    if suffix == ".mcap":
-        from ropod_sysid.io.mcaplog import read_mcap_log
+    from ropod_sysid.io.mcaplog import read_mcap_log
 
-        return read_mcap_log(path, platform)
-    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv or .mcap")
+    return read_mcap_log(path, platform)
 
 
 def write_log(log: Log, path: str | Path, platform: Platform | None = None) -> None:
-    """Write a log; the suffix picks the format (.csv, .mcap)."""
+    """Write a log; the suffix picks the format (.csv, .csv.gz, .mcap)."""
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix == ".csv":
+    if log_format(path) == ".csv":
         from ropod_sysid.io.csvlog import write_csv_log
 
         write_csv_log(log, path)
         return
-    if suffix == ".mcap":
-        from ropod_sysid.io.mcaplog import write_mcap_log
+    from ropod_sysid.io.mcaplog import write_mcap_log
 
-        write_mcap_log(log, path)
-        return
-    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv or .mcap")
+    write_mcap_log(log, path)
 
 
-__all__ = ["LOG_SUFFIXES", "Log", "read_log", "write_log"]
+__all__ = ["LOG_SUFFIXES", "Log", "log_format", "read_log", "write_log"]
