@@ -381,3 +381,16 @@ def test_chromium_renders_the_report(full_html, tmp_path):
     # the dark header band and a figure below it: the page is laid out, not a plain text dump
     assert img[30, :, :3].mean() < 0.4
     assert img[1000:2000, :, :3].std() > 0.05
+
+
+def test_compare_accepts_a_flat_truth_mapping(sim, tmp_path):
+    """A simulation's truth (name: value) is shown beside the fit like a parameter file."""
+    import json
+
+    platform, params, logs, result = sim
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps(params.to_mapping(platform.unit_names)))
+    html = render_fit_report(result, logs[:2], compare=truth)
+    body = html.split('id="parameter-table"', 1)[1].split("</table>", 1)[0]
+    m_b = next(r for r in body.split("<tr>")[2:] if ">m_b<" in r)
+    assert ">35.1<" in m_b and "truth.json" in html

@@ -32,7 +32,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, FitResult, LogFit, fit_systems
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file
+from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
@@ -353,7 +353,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
     if len(logs) != len(result.logs):
         raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
                          f"{len(logs)}")
-    compare_pf, compare_label = _compare(compare, compare_label)
+    compare_pf, compare_label = _compare(compare, compare_label, result.platform.unit_names)
     platform = result.platform
     sol = result.solution
     physical = result.physical is not None
@@ -432,12 +432,24 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
 
 
 def _compare(compare: str | Path | ParameterFile | None, label: str | None,
-             ) -> tuple[ParameterFile | None, str | None]:
+             units: Sequence[str]) -> tuple[ParameterFile | None, str | None]:
+    """The parameter file to show beside the fit: a fit's parameter file, or a flat
+    name → value mapping such as a simulation's truth."""
     if compare is None:
         return None, None
     if isinstance(compare, ParameterFile):
         return compare, label or "comparison"
-    return read_parameter_file(compare), label or Path(compare).name
+    try:
+        pfile = read_parameter_file(compare)
+    except InputError as exc:
+        try:
+            values = read_truth_parameters(compare, units)
+        except InputError:
+            raise exc from None
+        pfile = ParameterFile("", {k: {"value": v, "std": None} for k, v in values.items()},
+                              {"translation": float("nan"), "rotation": float("nan")},
+                              float("nan"), 0, 0)
+    return pfile, label or Path(compare).name
 
 
 def write_fit_report(result: FitResult, logs: Sequence[Log], path: str | Path, *,
