@@ -30,8 +30,8 @@ from ropod_sysid.io.smartwheel import (
 from ropod_sysid.platform import Platform, platform_from_dict
 
 # fit of the smart-wheel files vs the clean log: relative difference per parameter. The inputs
-# differ only by rounding (unwrapping adds 2πk, t passes through integer nanoseconds), measured
-# ≤ 2e-12 relative; the bound leaves room for other BLAS builds.
+# differ only by rounding (unwrapping adds 2πk, t passes through integer nanoseconds); measured
+# 3e-12 (unwrapped encoders) to 3e-11 (wrapped) relative; the bound leaves room for other BLAS.
 FIT_RTOL = 1e-9
 
 
