@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import sys
+import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -20,11 +21,18 @@ def fail(message: str) -> None:
     sys.exit(2)
 
 
+def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                      lineno: int, line: str | None = None) -> str:
+    """Warnings (e.g. a damaged MCAP file read up to the damage) as one line on stderr."""
+    return f"warning: {' '.join(str(message).split())}\n"
+
+
 def reports_errors(func: F) -> F:
     """Turn :class:`InputError` (and unreadable files) into one line and exit status 2."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        warnings.formatwarning = _one_line_warning  # type: ignore[assignment]
         try:
             return func(*args, **kwargs)
         except InputError as exc:

@@ -116,7 +116,8 @@ class Solution:
         determined only in combination
     singular_values : of the column-scaled free regressor (descending)
     rank : numerical rank of the column-scaled free regressor
-    condition_number : σ_max/σ_min of the column-scaled free regressor (inf if rank deficient)
+    condition_number : σ_max/σ_min of the column-scaled free regressor; when it is rank
+        deficient, of its identifiable part (σ_max over the smallest σ counted in the rank)
     null_space : (p, k) basis of the combinations the data cannot separate (in parameters)
     combination : (p,) True where the value is determined only in combination with others
     combinations : name → readable identifiable combination the value stands for
@@ -244,7 +245,8 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
                                         method="bvls", lsmr_tol="auto")
         values[free] = res.x / scale
 
-    cond = float(sv[0] / sv[-1]) if rank == q_free and sv[-1] > 0 else float("inf")
+    # of the identifiable part: σ_max over the smallest singular value kept
+    cond = float(sv[0] / sv[rank - 1])
     return Solution(names, values, std, sv, rank, cond, null, combination, combinations, fixed,
                     sigma2, rows, cov)
 

@@ -74,8 +74,10 @@ def format_fit(result: FitResult) -> str:
                      f" / {lf.rms['rotation']:.4g} N m, rotation weight {lf.weight:.3g}")
         for note in lf.notes:
             lines.append(f"    note: {note}")
-    lines.append(f"rank {sol.rank} of {len(sol.names) - len(sol.fixed)} free parameters, "
-                 f"condition number {sol.condition_number:.4g} (column-scaled)")
+    free = len(sol.names) - len(sol.fixed)
+    part = "" if sol.rank == free else ", of the identifiable part"
+    lines.append(f"rank {sol.rank} of {free} free parameters, condition number "
+                 f"{sol.condition_number:.4g} (column-scaled{part})")
     if result.input_delay:
         lines.append(f"input delay {1000 * result.input_delay:.2f} ms")
     for text in sol.null_space_text():
