@@ -21,16 +21,18 @@ side) when P_i reverses or passes near zero while turning. Limits, as in the the
 experiments: |v| = |(vx, vy)| ≤ v_max, |a| ≤ a_max (the world acceleration of the base origin,
 centripetal part included), |ω| ≤ ω_max, |ω̇| ≤ α_max, |δ̇_i| ≤ pivot_rate_max.
 
-Contents: :class:`Trajectory` (CSV I/O, setpoints), :func:`typical`, :func:`variants` and
-:func:`predict_pivots`.
+Contents: :class:`Trajectory` (CSV I/O, setpoints), :func:`typical`, :func:`variants`,
+:func:`predict_pivots`, :func:`check` (limits, floor, pivot rates, the predicted stacked
+regressor's condition number and rank and each parameter's predicted standard deviation),
+:func:`plot` and :func:`optimize` (finite Fourier series, Swevers et al.).
 """
 
 from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -309,8 +311,8 @@ def read_trajectory_csv(path: str | Path) -> Trajectory:
     bad = np.flatnonzero(~(np.diff(t) > 0))
     if bad.size:
         k = int(bad[0])
-        raise InputError(f"{where}: line {lines[k + 1]}, column 't': t={t[k + 1]!r} is not after "
-                         f"t={t[k]!r} on line {lines[k]}; time must strictly increase")
+        raise InputError(f"{where}: line {lines[k + 1]}, column 't': t={float(t[k + 1])!r} is not "
+                         f"after t={float(t[k])!r} on line {lines[k]}; time must strictly increase")
     if pose_present:
         return Trajectory(*(np.ascontiguousarray(data[:, j]) for j in range(7)))
     return Trajectory.from_twist(t, data[:, 1], data[:, 2], data[:, 3])
@@ -957,3 +959,837 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         return traj
     raise PlanningError(f"cannot plan a typical run within the limits: {last_error}; relax "
                         "the limits, enlarge the floor or use no pivot-rate limit")
+
+
+# ---------------------------------------------------------------------------------------------
+# the predicted regressor (eqs. 35, 36, 66) along planned motions
+
+
+def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = None,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World-frame q, q̇, q̈ (..., N, 3) of base-frame twists (..., N, 3) starting at zero.
+
+    ``rates`` are the twist derivatives (second-order differences if not given).
+    """
+    if rates is None:
+        rates = np.gradient(twist, t, axis=-2, edge_order=2)
+    x, y, th = integrate_pose(t, twist[..., 0], twist[..., 1], twist[..., 2])
+    c, s = np.cos(th), np.sin(th)
+    vx, vy, w = twist[..., 0], twist[..., 1], twist[..., 2]
+    ax = rates[..., 0] - w * vy
+    ay = rates[..., 1] + w * vx
+    q = np.stack([x, y, th], axis=-1)
+    qd = np.stack([c * vx - s * vy, s * vx + c * vy, w], axis=-1)
+    qdd = np.stack([c * ax - s * ay, s * ax + c * ay, rates[..., 2]], axis=-1)
+    return q, qd, qdd
+
+
+def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                    delta: np.ndarray, friction: str, chunk: int = 20000) -> np.ndarray:
+    """A_ID,ext (M, 3, p) at M samples (chunked to bound the memory)."""
+    out = []
+    for k in range(0, q.shape[0], chunk):
+        sl = slice(k, k + chunk)
+        st = model.state(q[sl], qd[sl], delta[sl])  # type: ignore[attr-defined]
+        out.append(model.a_id_ext(st, qdd[sl], friction))  # type: ignore[attr-defined]
+    return np.concatenate(out, axis=0)
+
+
+@dataclass
+class Conditioning:
+    """Column-scaled singular values of a stacked regressor and what they say.
+
+    singular_values : descending, of A with every column scaled to unit norm (as
+        :func:`ropod_sysid.solve.solve` does)
+    rank : number of singular values above ``1e-9 σ_max`` (the identifiable subspace)
+    condition_number : σ_max / σ_rank — on the identifiable subspace
+    condition_number_full : σ_max / σ_min over all columns (inf when rank deficient)
+    """
+
+    singular_values: np.ndarray
+    rank: int
+    condition_number: float
+    condition_number_full: float
+
+
+RANK_TOL = 1e-9
+
+
+def conditioning(a: np.ndarray) -> Conditioning:
+    """:class:`Conditioning` of a stacked regressor (M, p) (or (…, 3, p) rows)."""
+    a = a.reshape(-1, a.shape[-1])
+    norms = np.linalg.norm(a, axis=0)
+    sv = np.linalg.svd(a / np.where(norms > 0, norms, 1.0), compute_uv=False)
+    if sv.size == 0 or sv[0] == 0:
+        return Conditioning(sv, 0, math.inf, math.inf)
+    rank = int(np.sum(sv > RANK_TOL * sv[0]))
+    full = float(sv[0] / sv[-1]) if rank == sv.size else math.inf
+    return Conditioning(sv, rank, float(sv[0] / sv[rank - 1]), full)
+
+
+def predicted_std(a: np.ndarray, noise: float | tuple[float, float] = 1.0,
+                  rows_per_second: float = 1.0, tol: float = RANK_TOL) -> np.ndarray:
+    """Predicted standard deviation of each parameter (p,) of a least-squares fit.
+
+    Parameters
+    ----------
+    a : (M, 3, p) regressor rows sampled at ``rows_per_second`` samples per second of run
+    noise : σ of b_ID, white: one value for every row, or (translation [N], rotation [N m])
+    rows_per_second : the log samples each evaluated sample stands for: the information of a
+        log at rate r_log evaluated at rate r_eval is r_log / r_eval times that of the rows
+
+    Returns σ·sqrt(diag((AᵀWA)⁺)) with W = diag(1/σ²); parameters the data determine only in
+    combination with others (outside the identifiable subspace) get inf.
+    """
+    sig = (noise, noise) if isinstance(noise, int | float) else noise
+    w = np.array([1.0 / sig[0], 1.0 / sig[0], 1.0 / sig[1]])
+    aw = (a * w[None, :, None]).reshape(-1, a.shape[-1]) * math.sqrt(rows_per_second)
+    norms = np.linalg.norm(aw, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
+    _, sv, vt = np.linalg.svd(aw / scale, full_matrices=False)
+    if sv.size == 0 or sv[0] == 0:
+        return np.full(a.shape[-1], math.inf)
+    r = int(np.sum(sv > tol * sv[0]))
+    vr = vt[:r].T  # (p, r)
+    cov_diag = ((vr / sv[:r]) ** 2).sum(axis=1) / scale**2
+    # a unit vector e_j is identifiable when it lies in the row space span(vr)
+    inside = np.linalg.norm(vr, axis=1) > 1 - 1e-6
+    return np.where(inside & (norms > 0), np.sqrt(cov_diag), math.inf)
+
+
+# ---------------------------------------------------------------------------------------------
+# check
+
+
+@dataclass
+class Finding:
+    """A limit, floor or pivot finding: what, where (time range [s], variant) and how much."""
+
+    what: str
+    limit: float
+    peak: float
+    t_start: float
+    t_end: float
+    variant: str = "all"
+
+    def text(self) -> str:
+        return (f"{self.what}: {self.peak:.3g} > {self.limit:.3g} from t={self.t_start:.2f} s "
+                f"to {self.t_end:.2f} s ({self.variant})")
+
+
+def _runs(mask: np.ndarray, t: np.ndarray, values: np.ndarray, what: str, limit: float,
+          variant: str) -> list[Finding]:
+    """Contiguous runs of ``mask`` as findings (peak of ``values`` in each)."""
+    out = []
+    if not np.any(mask):
+        return out
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(m))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        out.append(Finding(what, limit, float(np.max(values[a:b])), float(t[a]),
+                           float(t[b - 1]), variant))
+    return out
+
+
+@dataclass
+class CheckReport:
+    """Everything :func:`check` found out about a planned run.
+
+    Attributes
+    ----------
+    duration, samples : of the run
+    limits, floor : what it was checked against
+    peaks : name → maximum over the four variants of |v|, |a|, |ω|, |ω̇| and the pivot rate
+    findings : limits broken (with time range and variant), floor left, wheel flips
+    pivot_peak : (4, n) maximum |δ̇| per variant and unit [rad/s]; pivot_peak_time (4, n) [s]
+    extent : (4, 4) x_min, x_max, y_min, y_max of the planned path of each variant [m]
+    names : parameter names (per-wheel or shared friction)
+    conditioning : of the stacked regressor of the four variants
+    true_values, std, relative_std : (p,) parameters, predicted standard deviations and
+        std / |true value| for noise σ_b = ``noise`` at ``log_rate``
+    """
+
+    duration: float
+    samples: int
+    platform: str
+    units: list[str]
+    limits: Limits
+    floor: Floor
+    peaks: dict[str, float]
+    findings: list[Finding]
+    pivot_peak: np.ndarray
+    pivot_peak_time: np.ndarray
+    extent: np.ndarray
+    names: list[str]
+    conditioning: Conditioning
+    noise: float
+    log_rate: float
+    true_values: np.ndarray
+    std: np.ndarray
+    relative_std: np.ndarray
+    friction: str = "per-wheel"
+
+    @property
+    def condition_number(self) -> float:
+        return self.conditioning.condition_number
+
+    @property
+    def rank(self) -> int:
+        return self.conditioning.rank
+
+    @property
+    def ok(self) -> bool:
+        """True when the run breaks no limit, stays on the floor and flips no wheel."""
+        return not self.findings
+
+    def to_dict(self) -> dict[str, object]:
+        """A JSON-ready summary."""
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        return {
+            "duration": self.duration, "samples": self.samples, "platform": self.platform,
+            "limits": {"v_max": self.limits.v_max, "a_max": self.limits.a_max,
+                       "w_max": self.limits.w_max, "alpha_max": self.limits.alpha_max,
+                       "pivot_rate_max": self.limits.pivot_rate_max},
+            "floor": list(self.floor),
+            "peaks": {k: num(v) for k, v in self.peaks.items()},
+            "ok": self.ok,
+            "findings": [f.__dict__ for f in self.findings],
+            "pivot_rate_max": {v: {u: num(self.pivot_peak[i, j])
+                                   for j, u in enumerate(self.units)}
+                               for i, v in enumerate(VARIANTS)},
+            "extent": {v: [float(e) for e in self.extent[i]] for i, v in enumerate(VARIANTS)},
+            "friction": self.friction,
+            "rank": self.rank, "parameters": len(self.names),
+            "condition_number": num(self.condition_number),
+            "condition_number_full": num(self.conditioning.condition_number_full),
+            "noise": self.noise, "log_rate": self.log_rate,
+            "predicted": {n: {"value": float(v), "std": num(s), "relative_std": num(r)}
+                          for n, v, s, r in zip(self.names, self.true_values, self.std,
+                                                self.relative_std, strict=True)},
+        }
+
+    def text(self) -> str:
+        """A readable account (table) for the terminal."""
+        lim = self.limits
+        out = [f"run: {self.duration:.2f} s, {self.samples} setpoints; platform {self.platform} "
+               f"({len(self.units)} units); variants: {', '.join(VARIANTS)}"]
+        rows = [("speed |v|", "m/s", self.peaks["speed"], lim.v_max),
+                ("acceleration |a|", "m/s²", self.peaks["acceleration"], lim.a_max),
+                ("rotation rate |ω|", "rad/s", self.peaks["omega"], lim.w_max),
+                ("rot. acceleration |ω̇|", "rad/s²", self.peaks["alpha"], lim.alpha_max),
+                ("pivot rate |δ̇| (predicted)", "rad/s", self.peaks["pivot_rate"],
+                 lim.pivot_rate_max)]
+        out.append("")
+        out.append(f"{'limit':<36}{'max':>10}{'limit':>10}  status")
+        for name, unit, peak, limit in rows:
+            status = "-" if limit is None else ("ok" if peak <= limit * (1 + 1e-9) else
+                                                 "EXCEEDED")
+            lim_s = "none" if limit is None else f"{limit:.3g}"
+            out.append(f"{name + ' [' + unit + ']':<36}{peak:>10.3f}{lim_s:>10}  {status}")
+        x0, x1, y0, y1 = self.floor
+        ext = self.extent
+        inside = not any(f.what.startswith("floor") for f in self.findings)
+        out.append(f"{'floor x [' + f'{x0:g}, {x1:g}' + '] m':<36}{ext[:, 0].min():>10.2f}"
+                   f"{ext[:, 1].max():>10.2f}  {'ok' if inside else 'LEFT'}")
+        out.append(f"{'floor y [' + f'{y0:g}, {y1:g}' + '] m':<36}{ext[:, 2].min():>10.2f}"
+                   f"{ext[:, 3].max():>10.2f}  {'ok' if inside else 'LEFT'}")
+        out.append("")
+        out.append("max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):")
+        out.append(f"{'variant':<18}" + "".join(f"{'unit ' + u:>12}" for u in self.units))
+        for i, v in enumerate(VARIANTS):
+            cells = [f"{self.pivot_peak[i, j]:>6.2f} @{self.pivot_peak_time[i, j]:>3.0f}s"
+                     for j in range(len(self.units))]
+            out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
+        out.append("")
+        if self.findings:
+            out.append(f"findings ({len(self.findings)}):")
+            for f in self.findings[:40]:
+                out.append(f"  - {f.text()}")
+            if len(self.findings) > 40:
+                out.append(f"  … and {len(self.findings) - 40} more (see --json)")
+        else:
+            out.append("findings: none (every limit respected, inside the floor, no wheel flip)")
+        out.append("")
+        c = self.conditioning
+        out.append(f"stacked regressor A_ID,ext of the four variants ({self.friction} friction): "
+                   f"{len(self.names)} parameters, rank {c.rank}")
+        out.append(f"  condition number (column-scaled, identifiable subspace): "
+                   f"{c.condition_number:.4g}")
+        if c.rank < len(self.names):
+            out.append(f"  condition number (all columns): inf — {len(self.names) - c.rank} "
+                       "combination(s) not identifiable (symmetric pivots: thesis Sec. VI-C)")
+        else:
+            out.append(f"  condition number (all columns): {c.condition_number_full:.4g}")
+        out.append("")
+        out.append(f"predicted standard deviation for white noise σ_b = {self.noise:g} N / N m "
+                   f"on b_ID at {self.log_rate:g} Hz:")
+        out.append(f"{'parameter':<12}{'value':>12}{'std':>12}{'rel. std':>12}")
+        for n, v, sd, r in zip(self.names, self.true_values, self.std, self.relative_std,
+                               strict=True):
+            sd_s = f"{sd:.3g}" if math.isfinite(sd) else "n/a"
+            r_s = f"{100 * r:.3g} %" if math.isfinite(r) else "combined"
+            out.append(f"{n:<12}{v:>12.4g}{sd_s:>12}{r_s:>12}")
+        return "\n".join(out)
+
+
+def _fine(traj: Trajectory, dt: float = 0.005) -> Trajectory:
+    """The trajectory on a grid of at most ``dt``, twist interpolated linearly (as the
+    simulator's and the robot's setpoint interpolation)."""
+    steps = np.diff(traj.t)
+    if steps.max() <= dt * (1 + 1e-9):
+        return traj
+    n = int(math.ceil(traj.duration / dt))
+    t = traj.t[0] + np.linspace(0.0, traj.duration, n + 1)
+    tw = np.stack([np.interp(t, traj.t, v) for v in (traj.vx, traj.vy, traj.omega)], axis=-1)
+    return Trajectory.from_twist(t, tw[:, 0], tw[:, 1], tw[:, 2])
+
+
+def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
+          floor: Sequence[float] = DEFAULT_FLOOR, noise: float = 1.0,
+          params: Mapping[str, float] | None = None, friction: str = "per-wheel",
+          log_rate: float = 100.0, eval_rate: float = 20.0) -> CheckReport:
+    """Check a planned run before putting the robot on the floor (thesis Sec. VI-A).
+
+    Parameters
+    ----------
+    traj : the run (original variant); the other three variants are derived from it
+    platform : geometry for the pivot rates and the regressor
+    limits : :class:`Limits` (default the thesis's); floor : (x_min, x_max, y_min, y_max) [m]
+    noise : σ_b [N, N m] of white noise on b_ID for the predicted standard deviations
+    params : true parameter values (name → value) for the relative standard deviations; default
+        :func:`ropod_sysid.params.thesis_fixed_masses`
+    friction : ``"per-wheel"`` or ``"shared"`` friction coefficients
+    log_rate : sample rate [Hz] of the logs the fit will use
+    eval_rate : rate [Hz] at which the regressor is evaluated (the information is scaled to
+        ``log_rate``)
+
+    Returns
+    -------
+    CheckReport
+        Limits and where they are broken, floor, predicted pivot rates per unit and wheel flips
+        (all four variants), and the stacked regressor A_ID,ext over the four variants along the
+        planned motion (q, q̇, q̈ in the world frame, pivots integrated with eq. 8a): its
+        condition number and rank (column-scaled), and the predicted standard deviation of
+        every parameter. Violations are findings, not errors.
+    """
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.params import DynamicParameters, parameter_names, thesis_fixed_masses
+
+    limits = limits or Limits()
+    floor = _check_floor(floor)
+    if friction not in ("per-wheel", "shared"):
+        raise InputError(f"unknown friction model {friction!r}; use per-wheel or shared")
+    if not (noise > 0 and math.isfinite(noise)):
+        raise InputError(f"noise must be a positive number (N, N m), got {noise!r}")
+    model = PlatformModel(platform)
+    var = variants(traj)
+    findings: list[Finding] = []
+    # limits: the same for all variants (sign changes only)
+    rates = traj.twist_rates()
+    speed, accel = traj.speed(), traj.acceleration()
+    omega, alpha = np.abs(traj.omega), np.abs(rates[:, 2])
+    checks = [("speed |v| [m/s]", speed, limits.v_max),
+              ("acceleration |a| [m/s²]", accel, limits.a_max),
+              ("rotation rate |ω| [rad/s]", omega, limits.w_max),
+              ("rotational acceleration |ω̇| [rad/s²]", alpha, limits.alpha_max)]
+    for what, values, limit in checks:
+        findings += _runs(values > limit * (1 + 1e-9), traj.t, values, what, limit, "all")
+    # floor, per variant (the planned path)
+    extent = np.zeros((4, 4))
+    fine = _fine(traj)
+    fine_var = variants(fine)
+    for i, (name, vt) in enumerate(var.items()):
+        extent[i] = [vt.x.min(), vt.x.max(), vt.y.min(), vt.y.max()]
+        out_x = np.maximum(floor[0] - vt.x, vt.x - floor[1])
+        out_y = np.maximum(floor[2] - vt.y, vt.y - floor[3])
+        findings += _runs(out_x > 0, vt.t, out_x, "floor left in x [m beyond]", 0.0, name)
+        findings += _runs(out_y > 0, vt.t, out_y, "floor left in y [m beyond]", 0.0, name)
+    # pivots (on a fine grid: the pivot ODE is stiff)
+    twists = np.stack([vt.twist() for vt in fine_var.values()])
+    pred = predict_pivots(fine.t, twists, platform)
+    prate = np.abs(pred.rate)
+    pivot_peak = prate.max(axis=1)
+    pivot_peak_time = fine.t[prate.argmax(axis=1)]
+    for i, name in enumerate(VARIANTS):
+        for j, u in enumerate(platform.unit_names):
+            if limits.pivot_rate_max is not None:
+                findings += _runs(prate[i, :, j] > limits.pivot_rate_max, fine.t, prate[i, :, j],
+                                  f"pivot rate of unit {u} [rad/s]", limits.pivot_rate_max, name)
+            findings += _runs(pred.pulling[i, :, j], fine.t,
+                              np.ones(fine.n_samples), f"unit {u} pulling (wheel flip)", 0.0,
+                              name)
+    peaks = {"speed": float(speed.max()), "acceleration": float(accel.max()),
+             "omega": float(omega.max()), "alpha": float(alpha.max()),
+             "pivot_rate": float(prate.max())}
+    # the stacked regressor along the planned motion (pivots as predicted)
+    step = max(int(round(1.0 / (eval_rate * float(np.median(np.diff(fine.t)))))), 1)
+    idx = np.arange(0, fine.n_samples, step)
+    q, qd, qdd = _world_motion(fine.t, twists)
+    n_var = len(VARIANTS)
+    a = _regressor_rows(model, q[:, idx].reshape(-1, 3), qd[:, idx].reshape(-1, 3),
+                        qdd[:, idx].reshape(-1, 3),
+                        pred.delta[:, idx].reshape(n_var * idx.size, -1), friction)
+    cond = conditioning(a)
+    names = parameter_names(platform.unit_names, friction)  # type: ignore[arg-type]
+    if params is None:
+        truth = thesis_fixed_masses(platform.unit_names)
+    else:
+        truth = DynamicParameters.from_mapping(params, platform.unit_names, "parameters")
+    true_values = truth.vector(platform.unit_names, friction)  # type: ignore[arg-type]
+    dt_eval = step * float(np.median(np.diff(fine.t)))
+    std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(np.abs(true_values) > 0, std / np.abs(true_values), math.inf)
+    findings.sort(key=lambda f: (f.t_start, f.what))
+    return CheckReport(traj.duration, traj.n_samples, platform.name, platform.unit_names,
+                       limits, floor, peaks, findings, pivot_peak, pivot_peak_time, extent,
+                       names, cond, float(noise), float(log_rate), true_values, std, rel,
+                       friction)
+
+
+def plot(traj: Trajectory, path: str | Path, floor: Sequence[float] = DEFAULT_FLOOR,
+         limits: Limits | None = None, platform: Platform | None = None) -> None:
+    """Plot the planned path of the four variants on the floor, and the speeds, rotation rate
+    and predicted pivot rates over time; PNG or SVG by the file suffix (written atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ropod_sysid.io.atomic import atomic_path
+
+    path = Path(path)
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in ("png", "svg"):
+        raise InputError(f"{path}: plot format {path.suffix or '(none)'!r} unknown; use a .png "
+                         "or .svg file name")
+    limits = limits or Limits()
+    floor = _check_floor(floor)
+    var = variants(traj)
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(13, 5), gridspec_kw={"width_ratios": [1.2, 1]})
+    x0, x1, y0, y1 = floor
+    ax0.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", color="0.4"))
+    for name, vt in var.items():
+        ax0.plot(vt.x, vt.y, lw=1.2 if name == "original" else 0.7, label=name,
+                 alpha=1.0 if name == "original" else 0.6)
+    ax0.plot([0], [0], "ko", ms=4)
+    ax0.set_aspect("equal")
+    ax0.set_xlabel("x [m]")
+    ax0.set_ylabel("y [m]")
+    ax0.set_title("planned path of the base origin")
+    ax0.legend(fontsize=8, loc="upper right")
+    ax1.plot(traj.t, traj.speed(), label="|v| [m/s]")
+    ax1.plot(traj.t, traj.acceleration(), label="|a| [m/s²]", lw=0.8)
+    ax1.plot(traj.t, traj.omega, label="ω [rad/s]", lw=0.8)
+    if platform is not None:
+        fine = _fine(traj)
+        twists = np.stack([vt.twist() for vt in variants(fine).values()])
+        pred = predict_pivots(fine.t, twists, platform)
+        ax1.plot(fine.t, np.abs(pred.rate).max(axis=(0, 2)), label="max |δ̇| [rad/s]", lw=0.8)
+        if limits.pivot_rate_max is not None:
+            ax1.axhline(limits.pivot_rate_max, color="0.5", ls=":", lw=0.8)
+    ax1.axhline(limits.v_max, color="0.5", ls="--", lw=0.8)
+    ax1.set_xlabel("t [s]")
+    ax1.set_title("setpoints and limits")
+    ax1.legend(fontsize=8)
+    fig.tight_layout()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=fmt, dpi=110)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the plot ({exc.strerror or exc})") from None
+    finally:
+        plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------
+# optimal excitation: finite Fourier series (Swevers et al.)
+
+
+KAPPA_FRACTION = 0.9  # FourierFamily: κ_max · max pivot radius (ICR outside the units)
+RHO_BETA, RHO_KAPPA = 0.5, 0.1  # FourierFamily: rate scales of direction and curvature
+NU_MIN = 0.25  # FourierFamily: least speed between the ramps, as a fraction of s_v
+MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
+
+
+class FourierFamily:
+    """Rest-to-rest finite Fourier series for the base motion, in polar form (base frame).
+
+    Each of the three base DOFs of the twist gets a finite Fourier series with base period T
+    and H harmonics (Swevers et al.; ω_f = 2π / T, coefficients c, a_l, b_l):
+
+        speed      ν(t) = s_v w(t) (ν_0 + (1 − ν_0)(1 + tanh g(t)) / 2),   ν_0 = 0.25
+                   g(t) = c_v + Σ a_l sin(lω_f t) + b_l cos(lω_f t)
+        direction  β(t) = π c_β + ρ_β w(t)² h_β(t)                 [rad, of travel, base frame]
+        curvature  κ(t) = κ_max tanh(c_κ + ρ_κ w(t)² h_κ(t))         [rad/m]
+        h(t) = Σ (a_l sin(lω_f t) − b_l cos(lω_f t)) / (l ω_f)        (so ḣ = Σ a_l cos + b_l sin)
+        (vx, vy) = ν (cos β, sin β),   ω = ν κ,
+
+    with w(t) a window rising from 0 to 1 over the first ``ramp`` seconds and falling back over
+    the last (minimum-jerk profile): rest to rest, acceleration continuous. Why polar rather than
+    a series per Cartesian component: pivot i moves with P_i = ν (e(β) + κ S r_i) (eq. 8a);
+    with |κ| < κ_max = 0.6 / max|r_i| the bracket never vanishes — the instantaneous centre of
+    rotation stays outside the units — so no pivot velocity ever reverses (no wheel flip, Sec.
+    VI-A) whatever the coefficients, where Cartesian series reverse them all the time; between
+    the ramps the speed stays above ν_0 s_v, for a unit cannot turn while its pivot stands. The
+    direction of P_i, hence the pivot rate, depends on β and κ only, not on the speed scale s_v;
+    ρ_β and ρ_κ size the rates of β and of κ's argument to the pivot-rate budget, and β, κ vary
+    only where w is near 1 (w² factor), so the units need not turn while the base barely moves.
+    """
+
+    def __init__(self, duration: float, harmonics: int, t: np.ndarray, r_max: float,
+                 rate_budget: float = 1.5, ramp: float | None = None) -> None:
+        self.duration = float(duration)
+        self.harmonics = int(harmonics)
+        self.t = np.asarray(t, float)
+        self.ramp = float(ramp if ramp is not None else min(0.15 * duration, 4.0))
+        self.kappa_max = KAPPA_FRACTION / max(float(r_max), 1e-6)
+        self.rho_beta = RHO_BETA * rate_budget / math.sqrt(2 * self.harmonics)
+        self.rho_kappa = RHO_KAPPA * rate_budget / math.sqrt(2 * self.harmonics)
+        wf = 2 * math.pi / self.duration
+        lw = wf * np.arange(1, self.harmonics + 1)
+        arg = np.outer(self.t, lw)
+        sn, cs = np.sin(arg), np.cos(arg)
+        one, zero = np.ones((len(self.t), 1)), np.zeros((len(self.t), 1))
+        # bases (N, 2H+1); coefficient order [c, a_1..a_H, b_1..b_H]
+        self.g0 = np.hstack([one, sn, cs])  # g and ġ (speed)
+        self.g1 = np.hstack([zero, cs * lw, -sn * lw])
+        self.h0 = np.hstack([zero, sn / lw, -cs / lw])  # h and ḣ (direction, curvature)
+        self.h1 = np.hstack([zero, cs, sn])
+        up, dup, _ = _quintic(self.t / self.ramp)
+        dn, ddn, _ = _quintic((self.duration - self.t) / self.ramp)
+        self.w = up * dn
+        self.dw = dup / self.ramp * dn - up * ddn / self.ramp
+
+    @property
+    def n_coefficients(self) -> int:
+        return 3 * (2 * self.harmonics + 1)
+
+    def shape(self, coef: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(ν, ν̇, β, β̇, κ, κ̇) (S, N) at unit speed scale for coefficients (S, 3(2H+1))."""
+        c = np.asarray(coef, float).reshape(-1, 3, 2 * self.harmonics + 1)
+        g = c[:, 0] @ self.g0.T
+        gd = c[:, 0] @ self.g1.T
+        w, dw = self.w, self.dw
+        th = np.tanh(g)
+        base = NU_MIN + (1 - NU_MIN) * (1 + th) / 2
+        nu = w * base
+        nud = dw * base + w * (1 - NU_MIN) * (1 - th**2) * gd / 2
+        w2, dw2 = w**2, 2 * w * dw
+        hb, hbd = c[:, 1] @ self.h0.T, c[:, 1] @ self.h1.T
+        beta = math.pi * c[:, 1, :1] + self.rho_beta * w2 * hb
+        betad = self.rho_beta * (dw2 * hb + w2 * hbd)
+        hk, hkd = c[:, 2] @ self.h0.T, c[:, 2] @ self.h1.T
+        tk = np.tanh(c[:, 2, :1] + self.rho_kappa * w2 * hk)
+        kappa = self.kappa_max * tk
+        kappad = self.kappa_max * (1 - tk**2) * self.rho_kappa * (dw2 * hk + w2 * hkd)
+        return nu, nud, beta, betad, kappa, kappad
+
+
+def _variant_paths(t: np.ndarray, tw: np.ndarray) -> np.ndarray:
+    """World positions (S, 4, N, 2) of the four variants of base-frame twists (S, N, 3)."""
+    out = np.empty(tw.shape[:1] + (4,) + tw.shape[1:2] + (2,))
+    for k, name in enumerate(VARIANTS):
+        sx, sy, sw = VARIANT_SIGNS[name]
+        x, y, _ = integrate_pose(t, sx * tw[..., 0], sy * tw[..., 1], sw * tw[..., 2])
+        out[:, k, :, 0], out[:, k, :, 1] = x, y
+    return out
+
+
+@dataclass
+class OptimizeResult:
+    """An optimised excitation run and how it was found.
+
+    Attributes
+    ----------
+    trajectory : the run (original variant), rest to rest, within the limits and the floor
+    objective : ``"cond"`` or ``"logdet"``; value : its value (objective grid, penalties in)
+    condition_number, rank : of the stacked regressor of the four variants (identifiable
+        subspace, as :func:`check` evaluates it on the run's own grid)
+    structural_rank : rank of the regressor the search found (identifiable subspace dimension)
+    coefficients : (3, 2H+1) Fourier coefficients of speed, direction, curvature
+    speed_scale : s_v [m/s]; evaluations, generations, seconds : the search's cost
+    """
+
+    trajectory: Trajectory
+    objective: str
+    value: float
+    condition_number: float
+    rank: int
+    structural_rank: int
+    coefficients: np.ndarray
+    speed_scale: float
+    evaluations: int
+    generations: int
+    seconds: float
+    notes: list[str] = field(default_factory=list)
+
+
+class _Objective:
+    """Vectorised objective of :func:`optimize` over a population of coefficient vectors."""
+
+    def __init__(self, platform: Platform, duration: float, harmonics: int, limits: Limits,
+                 floor: Floor, objective: str, friction: str, grid_rate: float,
+                 eval_rate: float) -> None:
+        from ropod_sysid.model import PlatformModel
+
+        self.platform = platform
+        self.model = PlatformModel(platform)
+        self.pivots = platform.pivots
+        self.s_w = platform.caster_offset
+        self.limits = limits
+        self.floor = floor
+        self.objective = objective
+        self.friction = friction
+        n = int(math.ceil(duration * grid_rate))
+        self.t = np.linspace(0.0, duration, n + 1)
+        r_max = float(np.linalg.norm(self.pivots, axis=1).max())
+        self.family = FourierFamily(duration, harmonics, self.t, r_max,
+                                    limits.pivot_rate_max or 1.5)
+        step = max(int(round(grid_rate / eval_rate)), 1)
+        self.eval_idx = np.arange(step // 2 + 1, n, step)  # interior samples (not at rest)
+        self.rank: int | None = None
+        self.evaluations = 0
+
+    def twist(self, coef: np.ndarray, margin: float = 0.95,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Twist and its rate (S, N, 3) at the largest speed scale s_v within the limits and the
+        floor (all four variants) times ``margin``, and s_v (S,)."""
+        return _scaled_twist(self.family, coef, self.limits, self.floor, self.t, margin)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """Objective values (S,) for coefficients x (D, S) (scipy's vectorised layout)."""
+        coef = np.atleast_2d(np.asarray(x, float).T)
+        out = np.empty(coef.shape[0])
+        for k in range(0, coef.shape[0], 64):
+            out[k:k + 64] = self._batch(coef[k:k + 64])
+        self.evaluations += coef.shape[0]
+        return out
+
+    def pivots_quasi_steady(self, tw: np.ndarray, twd: np.ndarray,
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Quasi-steady pivot angle, rate and sin(lag) (…, N, n) for twists (…, N, 3): every
+        unit trails its pivot velocity P_i with the lag that makes eq. 8a hold,
+        sin(ψ_i − δ_i) = s_w (ω + ψ̇_i) / |P_i| — meaningful only while it is well below 1."""
+        px, py = _pivot_velocities(tw, self.pivots)
+        pdx, pdy = _pivot_velocities(twd, self.pivots)
+        p2 = px**2 + py**2
+        speed = np.sqrt(p2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rate = np.where(p2 > 1e-18, (px * pdy - py * pdx) / p2, 0.0)
+            sin_lag = np.where(p2 > 1e-18, self.s_w * (tw[..., 2:3] + rate)
+                               / np.maximum(speed, 1e-12), 0.0)
+        lag = np.arcsin(np.clip(sin_lag, -1.0, 1.0))
+        return np.arctan2(py, px) - lag, rate, sin_lag
+
+    def _batch(self, coef: np.ndarray) -> np.ndarray:
+        tw, twd, _ = self.twist(coef)
+        signs = np.array([VARIANT_SIGNS[v] for v in VARIANTS])  # (4, 3)
+        tw_v = tw[:, None] * signs[None, :, None, :]
+        twd_v = twd[:, None] * signs[None, :, None, :]
+        delta, rate, sin_lag = self.pivots_quasi_steady(tw_v, twd_v)
+        lag = np.abs(sin_lag[:, :2]).max(axis=(1, 2, 3))  # negated variants: the same
+        penalty = np.maximum(lag / MAX_LAG - 1.0, 0.0)
+        if self.limits.pivot_rate_max is not None:
+            peak = np.abs(rate[:, :2]).max(axis=(1, 2, 3))
+            penalty += np.maximum(peak / (PIVOT_DESIGN_MARGIN * self.limits.pivot_rate_max)
+                                  - 1.0, 0.0)
+        idx = self.eval_idx
+        q, qd, qdd = _world_motion(self.t, tw_v, twd_v)
+        n_s, n_u = coef.shape[0], self.pivots.shape[0]
+        # pivot rates from the constraint (eq. 8a) at the quasi-steady angles: consistent
+        # kinematics, so the structural rank deficiency shows exactly
+        st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, 3),
+                              delta[:, :, idx].reshape(-1, n_u))
+        a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, 3),
+                                self.friction)  # type: ignore[arg-type]
+        a = a.reshape(n_s, -1, a.shape[-1])
+        norms = np.linalg.norm(a, axis=1)
+        a = a / np.where(norms > 0, norms, 1.0)[:, None, :]
+        gram = np.stack([ak.T @ ak for ak in a])  # (faster than a batched matmul here)
+        lam = np.clip(np.linalg.eigvalsh(gram)[:, ::-1], 1e-300, None)
+        if self.rank is None:
+            self.rank = max(conditioning(a[k]).rank for k in range(min(6, n_s)))
+        r = self.rank
+        if self.objective == "cond":
+            value = 0.5 * np.log(lam[:, 0] / lam[:, r - 1])
+        else:
+            value = -np.log(lam[:, :r]).sum(axis=1) / r
+        return value + 10.0 * penalty + 100.0 * penalty**2
+
+
+def _scaled_twist(family: FourierFamily, coef: np.ndarray, limits: Limits, floor: Floor,
+                  t: np.ndarray, margin: float, s_v: np.ndarray | None = None,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Twist, twist rate (S, N, 3) and speed scale s_v (S,) of a family's candidates.
+
+    s_v is the largest scale (times ``margin``) with |v| ≤ v_max, |ω| ≤ ω_max, |ω̇| ≤ α_max,
+    |a| ≤ a_max (a = s_v sqrt(ν̇² + ν² (β̇ + s_v ν κ)²) grows monotonically with s_v) and the
+    four variants inside the floor (bisection: the path grows with s_v); given s_v is used as is.
+    """
+    nu, nud, beta, betad, kappa, kappad = family.shape(coef)
+    tiny = 1e-12
+    if s_v is None:
+        hi = np.minimum.reduce([
+            limits.v_max / (nu.max(1) + tiny),
+            limits.w_max / (np.abs(nu * kappa).max(1) + tiny),
+            limits.alpha_max / (np.abs(nud * kappa + nu * kappad).max(1) + tiny)])
+        hi = np.minimum(hi * margin, 20.0)
+
+        sub = slice(None, None, max(len(t) // 150, 1))  # floor on a coarse grid
+        t_sub = t[sub]
+
+        def feasible(s: np.ndarray) -> np.ndarray:
+            sc = s[:, None]
+            acc = sc * np.sqrt(nud**2 + nu**2 * (betad + sc * nu * kappa) ** 2)
+            ok = acc.max(1) <= limits.a_max * margin
+            tw = _twist_of(sc, nu[:, sub], beta[:, sub], kappa[:, sub])
+            paths = _variant_paths(t_sub, tw)
+            x0, x1, y0, y1 = (margin * f for f in floor)
+            inside = ((paths[..., 0] >= x0) & (paths[..., 0] <= x1) & (paths[..., 1] >= y0)
+                      & (paths[..., 1] <= y1)).all(axis=(1, 2))
+            return ok & inside
+
+        lo = np.zeros_like(hi)
+        top = feasible(hi)
+        for _ in range(8):
+            mid = 0.5 * (lo + hi)
+            good = feasible(mid)
+            lo = np.where(good, mid, lo)
+            hi = np.where(good, hi, mid)
+        s_v = np.where(top, hi, lo)
+    sc = np.asarray(s_v, float)[:, None]
+    tw = _twist_of(sc, nu, beta, kappa)
+    cb, sb = np.cos(beta), np.sin(beta)
+    twd = np.stack([sc * (nud * cb - nu * betad * sb), sc * (nud * sb + nu * betad * cb),
+                    sc * (nud * kappa + nu * kappad)], axis=-1)
+    return tw, twd, np.asarray(s_v, float)
+
+
+def _twist_of(sc: np.ndarray, nu: np.ndarray, beta: np.ndarray, kappa: np.ndarray) -> np.ndarray:
+    return np.stack([sc * nu * np.cos(beta), sc * nu * np.sin(beta), sc * nu * kappa], axis=-1)
+
+
+def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
+             objective: str = "cond", seed: int = 0, maxiter: int = 25,
+             limits: Limits | None = None, floor: Sequence[float] = DEFAULT_FLOOR,
+             progress: bool = False, dt: float = 0.005, popsize: int = 4,
+             friction: str = "per-wheel") -> OptimizeResult:
+    """An optimal excitation run: finite Fourier series per base DOF (Swevers et al.).
+
+    The run is a member of :class:`FourierFamily` (speed, direction of travel and curvature of
+    the base, each a finite Fourier series, rest to rest, no pivot velocity ever reversing);
+    every candidate runs at the largest speed within the limits and the floor (all four
+    variants) at 95 %. The objective is evaluated on the stacked regressor A_ID,ext of the four
+    variants (Sec. VI-A) along the planned motion on a coarse grid, units trailing their pivot
+    velocities (quasi-steady eq. 8a):
+
+    * ``"cond"`` — the condition number of the column-scaled regressor on its identifiable
+      subspace (σ_max / σ_r, r the structural rank: on the ropod's symmetric square the regressor
+      is rank deficient for every run, thesis Sec. VI-C), minimised;
+    * ``"logdet"`` — the log-determinant of the column-scaled information matrix on that
+      subspace, maximised.
+
+    Pivot rates above 80 % of their limit are penalised. scipy's differential evolution searches
+    the coefficients (seeded, vectorised over the population); the best candidate whose limits,
+    floor and pivot rates integrated on the fine grid all hold is returned.
+
+    Parameters
+    ----------
+    platform : geometry (pivots, caster offset) for the regressor and the pivot rates
+    duration : length of the run [s]; harmonics : H, harmonics per DOF (base period = duration)
+    objective : ``"cond"`` or ``"logdet"``; seed : random seed (repeatable)
+    maxiter : generations of the search; popsize : population = popsize × 3(2H+1) candidates
+    limits, floor : as for :func:`typical`; progress : progress bar on stderr (terminal only)
+    dt : sample interval of the returned setpoints [s]; friction : friction model of A_ID,ext
+
+    Returns
+    -------
+    OptimizeResult
+    """
+    import time
+
+    import scipy.optimize
+
+    from ropod_sysid.progress import Progress
+
+    limits = limits or Limits()
+    floor = _check_floor(floor)
+    if objective not in ("cond", "logdet"):
+        raise InputError(f"unknown objective {objective!r}; use cond or logdet")
+    if isinstance(harmonics, bool) or not isinstance(harmonics, int) or not 1 <= harmonics <= 20:
+        raise InputError(f"harmonics must be an integer from 1 to 20, got {harmonics!r}")
+    if not (isinstance(duration, int | float) and 5.0 <= duration <= 600.0):
+        raise InputError(f"duration must be between 5 and 600 s, got {duration!r}")
+    if isinstance(maxiter, bool) or not isinstance(maxiter, int) or maxiter < 1:
+        raise InputError(f"maxiter must be a positive integer, got {maxiter!r}")
+    if friction not in ("per-wheel", "shared"):
+        raise InputError(f"unknown friction model {friction!r}; use per-wheel or shared")
+    t_start = time.monotonic()
+    obj = _Objective(platform, float(duration), harmonics, limits, floor, objective, friction,
+                     grid_rate=10.0, eval_rate=2.0)
+    dim = obj.family.n_coefficients
+    generations = 0
+    with Progress(maxiter, "optimize", quiet=not progress) as bar:
+        def callback(*_args: object, **_kw: object) -> None:
+            nonlocal generations
+            generations += 1
+            bar.update(1)
+
+        res = scipy.optimize.differential_evolution(
+            obj, [(-1.0, 1.0)] * dim, seed=seed, maxiter=maxiter, popsize=popsize, tol=0.0,
+            polish=False, vectorized=True, updating="deferred", init="latinhypercube",
+            callback=callback)
+    fine_t = np.linspace(0.0, duration, int(round(duration / dt)) + 1)
+    fam = FourierFamily(duration, harmonics, fine_t,
+                        float(np.linalg.norm(platform.pivots, axis=1).max()),
+                        limits.pivot_rate_max or 1.5)
+    notes: list[str] = []
+    why_first = ""
+    chosen = None
+    for rank_k, k in enumerate(np.argsort(res.population_energies)[:12]):
+        coef = res.population[k]
+        _, _, s_v = obj.twist(coef[None])
+        tw, _, _ = _scaled_twist(fam, coef[None], limits, floor, fine_t, 0.95, s_v)
+        traj = Trajectory.from_twist(fine_t, tw[0, :, 0], tw[0, :, 1], tw[0, :, 2])
+        ok, why = _verify(traj, platform, limits, floor)
+        if ok:
+            chosen = (coef, traj, float(s_v[0]), float(res.population_energies[k]))
+            if rank_k:
+                notes.append(f"{rank_k} better candidate(s) broke a limit on the fine grid "
+                             f"({why_first}); took the next")
+            break
+        why_first = why_first or why
+    if chosen is None:
+        raise PlanningError(f"no optimised run within the limits ({why_first}); try another "
+                            "seed, more maxiter or a longer duration")
+    coef, traj, s_v, value = chosen
+    rep = check(traj, platform, limits, floor, friction=friction)
+    return OptimizeResult(traj, objective, value, rep.condition_number, rep.rank,
+                          obj.rank or 0, coef.reshape(3, -1), s_v, obj.evaluations,
+                          generations, time.monotonic() - t_start, notes)
+
+
+def _verify(traj: Trajectory, platform: Platform, limits: Limits,
+            floor: Floor) -> tuple[bool, str]:
+    """Limits, floor (four variants) and integrated pivot rates of a run on its own grid."""
+    rates = traj.twist_rates()
+    if traj.speed().max() > limits.v_max:
+        return False, "speed"
+    if traj.acceleration().max() > limits.a_max:
+        return False, "acceleration"
+    if np.abs(traj.omega).max() > limits.w_max or np.abs(rates[:, 2]).max() > limits.alpha_max:
+        return False, "rotation"
+    var = variants(traj)
+    for name, vt in var.items():
+        if (vt.x.min() < floor[0] or vt.x.max() > floor[1] or vt.y.min() < floor[2]
+                or vt.y.max() > floor[3]):
+            return False, f"floor ({name})"
+    if limits.pivot_rate_max is not None:
+        pred = predict_pivots(traj.t, np.stack([vt.twist() for vt in var.values()]), platform)
+        peak = float(np.abs(pred.rate).max())
+        if peak > limits.pivot_rate_max or pred.pulling.any():
+            return False, f"pivot rate {peak:.2f} rad/s"
+    return True, ""

@@ -1,0 +1,237 @@
+"""``ropod-sysid trajectory``: plan identification runs (typical, optimised) and check them."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+
+from ropod_sysid.cli.common import quiet_option, reports_errors
+from ropod_sysid.errors import InputError
+from ropod_sysid.platform import Platform, load_platform
+
+OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
+             "negated": "negated.csv", "mirrored_negated": "mirrored_negated.csv"}
+
+
+def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    """--v-max, --a-max, --w-max, --alpha-max, --pivot-rate-max/--no-pivot-limit, --floor."""
+    options = [
+        click.option("--v-max", default=1.0, show_default=True, type=float,
+                     help="Speed limit |v| [m/s]."),
+        click.option("--a-max", default=1.0, show_default=True, type=float,
+                     help="Acceleration limit |a| of the base origin [m/s²]."),
+        click.option("--w-max", default=1.0, show_default=True, type=float,
+                     help="Rotation rate limit |ω| [rad/s]."),
+        click.option("--alpha-max", default=1.0, show_default=True, type=float,
+                     help="Rotational acceleration limit |ω̇| [rad/s²]."),
+        click.option("--pivot-rate-max", default=1.5, show_default=True, type=float,
+                     help="Pivot rate limit |δ̇| [rad/s] (keeps wheel flips out)."),
+        click.option("--no-pivot-limit", is_flag=True,
+                     help="Do not limit the pivot rates."),
+        click.option("--floor", nargs=4, type=float, default=None,
+                     metavar="XMIN XMAX YMIN YMAX",
+                     help="Floor rectangle for the base origin [m], start at (0, 0) "
+                          "[default: -3 3 -2 2]."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
+            pivot_rate_max: float, no_pivot_limit: bool) -> Any:
+    from ropod_sysid.trajectory import Limits
+
+    for name, value in (("--v-max", v_max), ("--a-max", a_max), ("--w-max", w_max),
+                        ("--alpha-max", alpha_max), ("--pivot-rate-max", pivot_rate_max)):
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"{name} {value:g}: must be a positive number")
+    return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max)
+
+
+def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]:
+    from ropod_sysid.trajectory import DEFAULT_FLOOR, _check_floor
+
+    if not floor:
+        return DEFAULT_FLOOR
+    try:
+        return _check_floor(floor)
+    except InputError as exc:
+        raise InputError(f"--floor: {exc}") from None
+
+
+def _out_dir(out: str) -> Path:
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"--out {out}: exists and is not a directory; give a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out {out}: cannot create the directory ({exc.strerror or exc})"
+                         ) from None
+    return path
+
+
+def _write_variants(traj: Any, out: str) -> list[Path]:
+    from ropod_sysid.trajectory import variants
+
+    folder = _out_dir(out)
+    written = []
+    for name, vt in variants(traj).items():
+        target = folder / OUT_FILES[name]
+        try:
+            vt.write_csv(target)
+        except OSError as exc:
+            raise InputError(f"{target}: cannot write ({exc.strerror or exc})") from None
+        written.append(target)
+    return written
+
+
+def _platform(path: str | None) -> Platform | None:
+    return None if path is None else load_platform(path)
+
+
+@click.group("trajectory", short_help="Plan identification runs and check them.")
+def command() -> None:
+    """Plan identification runs (thesis Sec. VI-A) and check them before the robot drives.
+
+    Setpoint CSVs: t, vx, vy, omega (base frame) and the planned pose x, y, theta (world frame,
+    start at 0); ``simulate --trajectory`` and the robot's velocity controller take them.
+    """
+
+
+@command.command("typical", short_help="A typical run (corners, rotations, lateral moves).")
+@limit_options
+@click.option("--duration", default=60.0, show_default=True, type=float,
+              help="Length of the run [s].")
+@click.option("--platform", "platform_path", type=click.Path(dir_okay=False), default=None,
+              help="Platform YAML for the pivot-rate prediction [default: the ropod].")
+@click.option("--seed", default=0, show_default=True, type=int,
+              help="0: the reference run; other seeds vary speeds and lobe order.")
+@click.option("--dt", default=0.005, show_default=True, type=float,
+              help="Setpoint sample interval [s].")
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False),
+              help="Directory for original.csv, mirrored.csv, negated.csv, "
+                   "mirrored_negated.csv.")
+@quiet_option
+@reports_errors
+def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
+                    pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
+                    duration: float, platform_path: str | None, seed: int, dt: float, out: str,
+                    quiet: bool) -> None:
+    """Write a typical run and its three variants (mirrored, negated, mirrored-negated)."""
+    from ropod_sysid.trajectory import typical
+
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
+    if not (math.isfinite(duration) and duration > 0):
+        raise InputError(f"--duration {duration:g}: must be a positive number of seconds")
+    if not (0 < dt <= 0.1):
+        raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
+    traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
+                   _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
+    written = _write_variants(traj, out)
+    if not quiet:
+        click.echo(f"typical run: {traj.duration:g} s, {traj.n_samples} setpoints; wrote "
+                   + ", ".join(str(p) for p in written))
+
+
+@command.command("optimize", short_help="An optimised run (Fourier series, min. condition).")
+@limit_options
+@click.option("--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
+              help="Platform YAML (geometry for the regressor and the pivot rates).")
+@click.option("--duration", default=30.0, show_default=True, type=float,
+              help="Length of the run [s].")
+@click.option("--harmonics", default=5, show_default=True, type=int,
+              help="Harmonics of each Fourier series.")
+@click.option("--objective", type=click.Choice(["cond", "logdet"]), default="cond",
+              show_default=True,
+              help="cond: least condition number; logdet: largest log-determinant.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
+@click.option("--maxiter", default=25, show_default=True, type=int,
+              help="Generations of the search (differential evolution).")
+@click.option("--dt", default=0.005, show_default=True, type=float,
+              help="Setpoint sample interval [s].")
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False),
+              help="Directory for original.csv, mirrored.csv, negated.csv, "
+                   "mirrored_negated.csv.")
+@quiet_option
+@reports_errors
+def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
+                     pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
+                     platform_path: str, duration: float, harmonics: int, objective: str,
+                     seed: int, maxiter: int, dt: float, out: str, quiet: bool) -> None:
+    """Search a run whose stacked regressor is best conditioned; write it and its variants."""
+    from ropod_sysid.trajectory import optimize
+
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
+    if not (0 < dt <= 0.1):
+        raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
+    platform = load_platform(platform_path)
+    _out_dir(out)
+    result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
+                      _floor(floor), progress=not quiet, dt=dt)
+    written = _write_variants(result.trajectory, out)
+    if not quiet:
+        click.echo(f"optimised run: {result.trajectory.duration:g} s, condition number "
+                   f"{result.condition_number:.4g} (rank {result.rank}, identifiable "
+                   f"subspace), {result.evaluations} candidates in {result.seconds:.1f} s")
+        for note in result.notes:
+            click.echo(f"note: {note}")
+        click.echo("wrote " + ", ".join(str(p) for p in written))
+
+
+@command.command("check", short_help="Limits, floor, pivot rates and predicted accuracy.")
+@click.argument("traj_path", metavar="TRAJ.csv", type=click.Path(dir_okay=False))
+@click.option("--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
+              help="Platform YAML (geometry).")
+@limit_options
+@click.option("--noise", default=1.0, show_default=True, type=float,
+              help="White noise σ on b_ID for the predicted standard deviations [N, N m].")
+@click.option("--log-rate", default=100.0, show_default=True, type=float,
+              help="Sample rate of the logs the fit will use [Hz].")
+@click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
+              show_default=True, help="Friction coefficients per wheel or shared.")
+@click.option("--params", "params_path", type=click.Path(dir_okay=False), default=None,
+              help="True parameter values for relative stds [default: thesis fixed masses].")
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
+              help="Plot of the path and the setpoints (.png or .svg).")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
+@reports_errors
+def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
+                  alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
+                  floor: tuple[float, ...], noise: float, log_rate: float, friction: str,
+                  params_path: str | None, plot_path: str | None, as_json: bool) -> None:
+    """Check a setpoint CSV before a run: limits broken and where, pivot rates, the predicted
+    condition number and rank of the four variants' stacked regressor, and the predicted
+    standard deviation of every parameter. Findings are reported, not errors (exit 0)."""
+    from ropod_sysid.trajectory import check, plot, read_trajectory_csv
+
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
+    if not (math.isfinite(noise) and noise > 0):
+        raise InputError(f"--noise {noise:g}: must be a positive number")
+    if not (math.isfinite(log_rate) and log_rate > 0):
+        raise InputError(f"--log-rate {log_rate:g}: must be a positive number")
+    if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
+        raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
+    platform = load_platform(platform_path)
+    traj = read_trajectory_csv(traj_path)
+    params = None
+    if params_path is not None:
+        from ropod_sysid.io.paramfile import read_truth_parameters
+
+        params = read_truth_parameters(params_path, platform.unit_names)
+    fl = _floor(floor)
+    report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
+    if plot_path is not None:
+        plot(traj, plot_path, fl, limits, platform)
+    if as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2, ensure_ascii=False))
+    else:
+        click.echo(report.text())
+        if plot_path is not None:
+            click.echo(f"\nplot: {plot_path}")
