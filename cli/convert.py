@@ -16,7 +16,7 @@ from ropod_sysid.io.smartwheel import write_smartwheel
 from ropod_sysid.platform import load_platform
 
 
-@click.command("convert")
+@click.command("convert", short_help="Convert a log between CSV, MCAP (JSON) and MCAP (ROS 2).")
 @click.argument("in_path", metavar="IN", type=click.Path(dir_okay=False))
 @click.argument("out_path", metavar="OUT", type=click.Path(dir_okay=False))
 @platform_option

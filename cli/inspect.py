@@ -11,7 +11,7 @@ from ropod_sysid.inspect import format_inspection, inspect_file
 from ropod_sysid.platform import load_platform
 
 
-@click.command("inspect")
+@click.command("inspect", short_help="Look at a log before fitting: rate, gaps, ranges, verdict.")
 @click.argument("log_path", metavar="LOG", type=click.Path(dir_okay=False))
 @platform_option
 @click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON.")
