@@ -1,0 +1,40 @@
+"""The disturbance observer of Sec. VII-B on a simulated push (eq. 40, 10 Hz low-pass)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ropod_sysid.simulate import ForceSchedule, simulate
+from ropod_sysid.validate import validate_log
+from tests.conftest import smooth_setpoints
+
+
+@pytest.fixture(scope="module")
+def pushed(off_square, truth):
+    """A 5 s run pushed sideways with 60 N between 2 and 3 s (base frame)."""
+    t = np.array([0.0, 2.0, 2.1, 2.9, 3.0, 5.0])
+    f = np.zeros((6, 3))
+    f[2:4, 1] = 60.0
+    (res,) = simulate(off_square, truth, smooth_setpoints(5.0, 1, 1),
+                      force=ForceSchedule(t, f), rate=200.0)
+    return res
+
+
+def test_observer_sees_the_push_and_nothing_else(off_square, truth, pushed):
+    v = validate_log(pushed.log, off_square, truth)
+    t, f_hat = v.t, v.f_hat
+    during = (t > 2.3) & (t < 2.9)
+    quiet = (t < 1.8) | (t > 3.4)
+    assert np.median(f_hat[during, 1]) == pytest.approx(60.0, rel=0.1)
+    assert np.abs(f_hat[quiet]).max() < 5.0
+    assert v.share_above["force"] == pytest.approx(np.mean(np.hypot(*f_hat[:, :2].T) > 40))
+    assert 0.05 < v.share_above["force"] < 0.3
+    assert v.share_above["torque"] == 0.0
+
+
+def test_clean_run_stays_below_the_thresholds(off_square, truth, runs_off_square):
+    v = validate_log(runs_off_square[2].log, off_square, truth)
+    assert v.share_above == {"force": 0.0, "torque": 0.0}
+    assert v.observer_max["F_bx"] < 5 and v.observer_max["T_bz"] < 2
+    assert v.rms["translation"] < 0.5
