@@ -113,7 +113,7 @@ def _iter_path(path: Path, platform: Platform, chunk: int) -> Iterator[Log]:
                 from ropod_sysid.io import smartwheel
             except ImportError:  # pragma: no cover - the smart-wheel layout is optional
                 smartwheel = None  # type: ignore[assignment]
-            if smartwheel is not None and smartwheel.is_smartwheel_csv(path):
+            if smartwheel is not None and _is_smartwheel(smartwheel, path):
                 # the robot's raw layout needs whole-log processing (frame checks, rates)
                 yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform), chunk)
                 return
@@ -132,6 +132,12 @@ def _iter_path(path: Path, platform: Platform, chunk: int) -> Iterator[Log]:
         return
     suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
     raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+
+
+def _is_smartwheel(module: object, path: Path) -> bool:
+    """Whether a .csv is the robot's raw smart-wheel layout (read by its own reader)."""
+    test = getattr(module, "is_smartwheel_csv", None)
+    return bool(test is not None and test(path))
 
 
 def _iter_log(log: Log, chunk: int) -> Iterator[Log]:
@@ -172,6 +178,10 @@ def _prefetch(chunks: Iterator[Log], depth: int = 2) -> Iterator[Log]:
             q.put(done)
         except BaseException as exc:  # handed to the consumer
             q.put(exc)
+        finally:
+            close = getattr(chunks, "close", None)
+            if close is not None:
+                close()
 
     thread = threading.Thread(target=work, daemon=True, name="ropod-sysid-reader")
     thread.start()
@@ -219,27 +229,41 @@ def _blas_libraries() -> list[tuple[ctypes.CDLL, str, str]]:
     return found
 
 
+_blas_lock = threading.Lock()
+_blas_users = 0
+_blas_saved: list[tuple[ctypes.CDLL, str, int]] = []
+
+
 @contextlib.contextmanager
 def single_thread_blas() -> Iterator[None]:
     """Run the block computations with one BLAS thread.
 
     The blocks are tall and thin (QR leaves of 256 × 30, batched 3 × 3 solves); threaded
     OpenBLAS gains nothing there and, on a busy machine, loses several-fold to spinning
-    threads. Best effort: without a recognisable OpenBLAS nothing changes.
+    threads. The setting is process-wide: the first of concurrent users (e.g. Dask worker
+    threads) sets it, the last restores it. Best effort: without a recognisable OpenBLAS
+    nothing changes.
     """
-    saved = []
-    for lib, setter, getter in _blas_libraries():
-        try:
-            n = int(getattr(lib, getter)())
-            getattr(lib, setter)(1)
-            saved.append((lib, setter, n))
-        except (OSError, ValueError):  # pragma: no cover - a foreign build
-            continue
+    global _blas_users
+    with _blas_lock:
+        if _blas_users == 0:
+            for lib, setter, getter in _blas_libraries():
+                try:
+                    n = int(getattr(lib, getter)())
+                    getattr(lib, setter)(1)
+                    _blas_saved.append((lib, setter, n))
+                except (OSError, ValueError):  # pragma: no cover - a foreign build
+                    continue
+        _blas_users += 1
     try:
         yield
     finally:
-        for lib, setter, n in saved:
-            getattr(lib, setter)(n)
+        with _blas_lock:
+            _blas_users -= 1
+            if _blas_users == 0:
+                for lib, setter, n in _blas_saved:
+                    getattr(lib, setter)(n)
+                _blas_saved.clear()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -661,6 +685,13 @@ def check_source(source: Source, platform: Platform) -> None:
     if not name.endswith((".csv", ".csv.gz", ".mcap")):
         suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
         raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+    if name.endswith(".csv"):
+        try:
+            from ropod_sysid.io import smartwheel
+        except ImportError:  # pragma: no cover
+            smartwheel = None  # type: ignore[assignment]
+        if smartwheel is not None and path.is_file() and _is_smartwheel(smartwheel, path):
+            return
     if name.endswith((".csv", ".csv.gz")):
         from ropod_sysid.io.csvlog import check_csv_header
 

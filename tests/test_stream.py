@@ -264,3 +264,25 @@ def test_chunk_of_in_memory_log_keeps_notes(off_square, runs_off_square):
     noted = Log(log.t, log.units, log.delta, log.phi, log.current, None, "noted", ["a note"])
     res = stream.stream_log(noted, off_square, chunk=500)
     assert res.notes == ["a note"]
+
+
+@pytest.mark.parametrize("kind", ["mcap", "smartwheel-csv"])
+def test_other_formats_are_read_whole_and_reduced_in_chunks(tmp_path, off_square,
+                                                            runs_off_square, kind):
+    """MCAP (no chunked reader yet) and the robot's smart-wheel CSV are read whole by their
+    readers, then reduced in chunks: the same fit as the in-memory path."""
+    from ropod_sysid.io import read_log
+
+    log = runs_off_square[1].log
+    if kind == "mcap":
+        from ropod_sysid.io.mcaplog import write_mcap_log
+
+        p = tmp_path / "run.mcap"
+        write_mcap_log(log, p)
+    else:
+        smartwheel = pytest.importorskip("ropod_sysid.io.smartwheel")
+        p = tmp_path / "run.csv"
+        smartwheel.write_smartwheel(log, p, off_square)
+    ref = fit_logs([read_log(p, off_square)], off_square)
+    fit = fit_files([p], off_square, chunk=300)
+    assert_same_values(ref, fit)

@@ -378,42 +378,65 @@ class _FastFailed(Exception):
     pass
 
 
-def _fast_chunks(path: Path, n_cols: int, col_idx: list[int], block_size: int,
+def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_bytes: int,
                  ) -> Iterator[np.ndarray]:
-    """Streaming counterpart of :func:`_fast_read`: the wanted columns block by block; raises
-    :class:`_FastFailed` where Arrow stops or a value is NaN, missing or infinite."""
+    """Streaming counterpart of :func:`_fast_read`: the wanted columns, ``block_bytes`` of the
+    file at a time; raises :class:`_FastFailed` where Arrow stops or a value is NaN, missing or
+    infinite.
+
+    The file is cut at line ends here and each piece parsed by Arrow's multi-threaded reader
+    from memory. (Arrow's own streaming reader reads ahead of a slow consumer without bound —
+    most of a large file — and parses on one thread.) A field with a quoted line break, which
+    a contract log never has, makes a piece unparsable and so takes the checked path.
+    """
     arrow_names = [f"c{k}" for k in range(n_cols)]
     include = [arrow_names[k] for k in col_idx]
+    read_options = pacsv.ReadOptions(column_names=arrow_names)
+    parse_options = pacsv.ParseOptions(delimiter=",")
+    convert_options = pacsv.ConvertOptions(column_types={c: pa.float64() for c in include},
+                                           include_columns=include)
+    with _open(path, where, binary=True) as f:
+        try:
+            f.readline()  # the header (one line, as _read_header reads it)
+            rest = b""
+            while True:
+                data = f.read(block_bytes)
+                buf = rest + data
+                if data:
+                    cut = buf.rfind(b"\n") + 1
+                    if cut == 0:  # no line end yet: read more
+                        rest = buf
+                        continue
+                    piece, rest = buf[:cut], buf[cut:]
+                else:
+                    piece, rest = buf, b""
+                if piece.strip():
+                    yield _parse_piece(piece, include, read_options, parse_options,
+                                       convert_options)
+                if not data:
+                    return
+        except OSError as exc:
+            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
+                from None
+
+
+def _parse_piece(piece: bytes, include: list[str], read_options: pacsv.ReadOptions,
+                 parse_options: pacsv.ParseOptions, convert_options: pacsv.ConvertOptions,
+                 ) -> np.ndarray:
     try:
-        reader = pacsv.open_csv(
-            path,
-            read_options=pacsv.ReadOptions(column_names=arrow_names, skip_rows=1,
-                                           block_size=block_size),
-            parse_options=pacsv.ParseOptions(delimiter=","),
-            convert_options=pacsv.ConvertOptions(
-                column_types={c: pa.float64() for c in include}, include_columns=include,
-            ),
-        )
-    except (pa.ArrowException, ValueError, OSError):
+        table = pacsv.read_csv(pa.BufferReader(piece), read_options=read_options,
+                               parse_options=parse_options, convert_options=convert_options)
+    except (pa.ArrowException, ValueError):
         raise _FastFailed from None
-    with reader:
-        while True:
-            try:
-                batch = reader.read_next_batch()
-            except StopIteration:
-                return
-            except (pa.ArrowException, ValueError, OSError):
-                raise _FastFailed from None
-            n = batch.num_rows
-            out = np.empty((len(include), n), dtype=np.float64)
-            for j in range(len(include)):
-                col = batch.column(j)
-                if col.null_count:
-                    raise _FastFailed
-                out[j] = col.to_numpy()
-            if n and not np.isfinite(out).all():
-                raise _FastFailed
-            yield out
+    out = np.empty((len(include), table.num_rows), dtype=np.float64)
+    for j, c in enumerate(include):
+        col = table.column(c)
+        if col.null_count:
+            raise _FastFailed
+        out[j] = col.to_numpy()
+    if out.size and not np.isfinite(out).all():
+        raise _FastFailed
+    return out
 
 
 def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_idx: list[int],
@@ -422,10 +445,10 @@ def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_i
     :func:`read_csv_log`: fast Arrow blocks while the file is clean; from the first block Arrow
     refuses (or holding NaN/inf) on, :func:`_diagnose_chunks` from the start of the file, which
     raises for the first bad line or reads on past harmless oddities (blank-looking lines)."""
-    block_size = max(1 << 16, min(chunk_rows * _row_bytes(path, where), 1 << 28))
+    block_bytes = max(1 << 16, min(chunk_rows * _row_bytes(path, where), 1 << 28))
     done = 0
     try:
-        for data in _fast_chunks(path, n_fields, col_idx, block_size):
+        for data in _fast_chunks(path, where, n_fields, col_idx, block_bytes):
             done += data.shape[1]
             yield data
         return
