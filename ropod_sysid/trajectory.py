@@ -773,10 +773,11 @@ def _fit_lobe(kind: str, design: _Design, caps: Limits, pivots: np.ndarray | Non
 
 
 def _start_spin(plan: _Plan, design: _Design) -> None:
-    """Start: a whole rotation in place from rest (units set tangentially, as they trail a
-    rotation), then away along +x through a tight arc, at cruise speed; heading back to 0."""
-    rot = np.array([0.0, 0.0, design.w_spin])
-    arc = np.array([design.v_spin, 0.0, design.w_spin])
+    """Start: a whole clockwise rotation in place from rest (units set tangentially, as they
+    trail a rotation), then away along +x through a tight right arc, at cruise speed; heading
+    back to 0 (mod 2π). Clockwise, so that the original run turns both ways early on."""
+    rot = np.array([0.0, 0.0, -design.w_spin])
+    arc = np.array([design.v_spin, 0.0, -design.w_spin])
     slow = np.array([design.v_spin, 0.0, 0.0])
     t_rot = plan.blend_time(np.zeros(3), rot)
     t_arc = plan.blend_time(rot, arc)
@@ -868,6 +869,10 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
       corners (acceleration phases); the first corner includes a whole rotation in place;
     * crab — the same loop at constant heading (the ropod is holonomic): the short sides driven
       sideways (vy), the long side backwards with a stop-and-go.
+
+    Runs of 30 s or more start with a whole clockwise rotation in place and a right arc. A 60 s
+    run holds the start, a left drive lobe and most of a crab lobe; the right corners of the
+    drive lobes follow in longer runs — and in the mirrored variant, which swaps them.
 
     The order is drive-left, drive-right, crab, crab-mirrored, and again. Every change of the
     twist is a minimum-jerk blend (10τ³ − 15τ⁴ + 6τ⁵) between constant levels, so the
@@ -1410,6 +1415,7 @@ def plot(traj: Trajectory, path: str | Path, floor: Sequence[float] = DEFAULT_FL
 
 KAPPA_FRACTION = 0.9  # FourierFamily: κ_max · max pivot radius (ICR outside the units)
 RHO_BETA, RHO_KAPPA = 0.5, 0.1  # FourierFamily: rate scales of direction and curvature
+SPEED_WEIGHT = 0.5  # optimize(): weight of −log(mean speed / v_max) in the objective
 NU_MIN = 0.25  # FourierFamily: least speed between the ramps, as a fraction of s_v
 MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
 
@@ -1617,6 +1623,9 @@ class _Objective:
             value = 0.5 * np.log(lam[:, 0] / lam[:, r - 1])
         else:
             value = -np.log(lam[:, :r]).sum(axis=1) / r
+        # tie-breaker towards brisk runs: the scaled regressor does not see the signal level
+        speed = np.linalg.norm(tw[..., :2], axis=-1).mean(axis=1) / self.limits.v_max
+        value = value - SPEED_WEIGHT * np.log(np.maximum(speed, 1e-6))
         return value + 10.0 * penalty + 100.0 * penalty**2
 
 
