@@ -1702,7 +1702,10 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     * ``"logdet"`` — the log-determinant of the column-scaled information matrix on that
       subspace, maximised.
 
-    Pivot rates above 80 % of their limit are penalised. scipy's differential evolution searches
+    Pivot rates above 80 % of their limit, and quasi-steady lags of a unit behind its pivot with
+    sin > 0.35 (a unit cannot follow a pivot that barely moves), are penalised; −0.5 log(mean
+    speed / v_max) is added as a tie-breaker towards brisk runs, which the column-scaled
+    regressor cannot see. scipy's differential evolution searches
     the coefficients (seeded, vectorised over the population); the best candidate whose limits,
     floor and pivot rates integrated on the fine grid all hold is returned.
 
