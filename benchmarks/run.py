@@ -350,8 +350,8 @@ def main() -> None:
     fits = {}
     for m in sizes:
         path, _ = logs[m]
-        parse(path)  # page cache warm for both
-        p = parse(path)
+        # twice (the first warms the page cache for both); the faster counts
+        p = min(parse(path), parse(path), key=lambda r: r["wall_s"])
         f = fit([path], platform_path, OUT / f"params_{m:g}min.json")
         v = values(OUT / f"params_{m:g}min.json")
         err = max(abs(v[k] - truth[k]) / abs(truth[k]) for k in ("m_b", "Jzz_b"))

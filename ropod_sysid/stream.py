@@ -1,8 +1,10 @@
 """Chunked identification: a log of any length in bounded memory, equal to the in-memory path.
 
-A log is read in chunks (:func:`ropod_sysid.io.csvlog.iter_csv_log` for CSV, also ``.csv.gz``)
-and goes through the steps of :func:`ropod_sysid.regressor.preprocess` and
-:func:`ropod_sysid.regressor.triangles` block by block:
+A log is read in chunks (:func:`ropod_sysid.io.csvlog.iter_csv_log` for CSV, also ``.csv.gz``;
+MCAP logs and the robot's smart-wheel CSV layout are read whole by their own readers, which
+have no chunked iteration yet, and then processed in chunks) and goes through the steps of
+:func:`ropod_sysid.regressor.preprocess` and :func:`ropod_sysid.regressor.triangles` block by
+block:
 
 1. pivot angles (and a tracker heading) unwrapped, continued across chunks;
 2. the sample time from the head of the log (:func:`ropod_sysid.regressor.grid_step`); a log
