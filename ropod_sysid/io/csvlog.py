@@ -677,14 +677,16 @@ def _data_row_lines(path: Path, count: int) -> list[int]:
 
 
 def write_csv_log(log: Log, path: str | Path) -> None:
-    """Write ``log`` as a contract CSV (columns of :meth:`Log.columns`), atomically.
+    """Write ``log`` as a contract CSV (columns of :meth:`Log.columns`), atomically;
+    gzip-compressed when the name ends in ``.gz``.
 
     Floats are written in the shortest form that reads back to the identical float64, so
     :func:`read_csv_log` of the written file returns bit-identical arrays.
     """
     cols = log.columns()
     table = pa.table({k: np.ascontiguousarray(v, dtype=np.float64) for k, v in cols.items()})
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+    opener = gzip.open if str(path).lower().endswith(".gz") else open
+    with atomic_path(path) as tmp, opener(tmp, "wb") as f:
         f.write((",".join(cols) + "\n").encode("utf-8"))
         pacsv.write_csv(table, f, pacsv.WriteOptions(include_header=False,
                                                      quoting_style="needed"))
