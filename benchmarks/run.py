@@ -244,7 +244,7 @@ def breakdown(path: Path, platform_path: Path) -> dict[str, float]:
     parts = {"reading CSV": ("csvlog.py", "_fast_chunks"),
              "model (A_ID,ext, b_ID)": ("regressor.py", "raw_system"),
              "LOESS (angles, A, b)": ("signals.py", "loess"),
-             "odometry": ("regressor.py", "odometry_from"),
+             "odometry": ("odometry.py", "odometry_from"),
              "QR triangles": ("regressor.py", "block_triangles"),
              "total": ("stream.py", "stream_log")}
     out = {}

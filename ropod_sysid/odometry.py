@@ -14,6 +14,8 @@ heading; the pose is zero at the first sample.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ropod_sysid.platform import Platform
@@ -50,24 +52,73 @@ def base_twist(platform: Platform, delta: np.ndarray, delta_rate: np.ndarray,
     return np.einsum("nij,nj->ni", np.linalg.pinv(a), b)
 
 
-def odometry(platform: Platform, delta: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """Base pose (x_b, y_b, θ_b) [m, m, rad] from encoder angles; (N, 3), zero at sample 0.
+def unwrap_from(p: np.ndarray, corr0: np.ndarray | None = None,
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`numpy.unwrap` along axis 0, continued from the correction ``corr0`` that an
+    unwrap of the earlier samples added at ``p[0]`` (None: p[0] is the first sample).
 
-    ``delta`` (N, n) pivot angles and ``phi`` (N, n, 2) wheel angles, unwrapped.
+    Returns the unwrapped samples and the correction at each sample; with the same formula
+    and a sequential cumulative sum it equals one ``np.unwrap`` over the whole signal bit for
+    bit, however the signal is cut into pieces.
     """
-    delta = np.unwrap(np.asarray(delta, float), axis=0)
+    p = np.asarray(p, dtype=float)
+    period = 2 * np.pi
+    low, high = -period / 2, period / 2
+    dd = np.diff(p, axis=0)
+    ddmod = np.mod(dd - low, period) + low
+    np.copyto(ddmod, high, where=(ddmod == low) & (dd > 0))
+    ph = ddmod - dd
+    np.copyto(ph, 0, where=np.abs(dd) < high)
+    start = np.zeros_like(p[:1]) if corr0 is None else np.asarray(corr0, float)[None]
+    corr = np.cumsum(np.concatenate([start, ph]), axis=0)
+    return p + corr, corr
+
+
+@dataclass
+class OdometryState:
+    """Where wheel odometry stands at one sample: the pose (x_b, y_b, θ_b) and the correction
+    unwrapping has added to each pivot angle there (to continue it over the next samples)."""
+
+    pose: np.ndarray  # (3,)
+    unwrap: np.ndarray  # (n,)
+
+
+def odometry_from(platform: Platform, delta: np.ndarray, phi: np.ndarray,
+                  start: OdometryState | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Base pose (N, 3) from smoothed encoder angles, as :func:`ropod_sysid.odometry.odometry`,
+    continued from ``start`` at sample 0 (None: the pose is zero there).
+
+    The per-interval least squares on the no-slip constraints is solved by a batched QR of the
+    (3n × 3) constraint matrices; the pose is the sequential cumulative sum of the displacements
+    from the start pose, so that a log cut into overlapping pieces gives the pose of one pass.
+    Returns the pose and the unwrapping corrections of δ per sample (for :class:`OdometryState`).
+    """
+    delta, corr = unwrap_from(delta, None if start is None else start.unwrap)
     phi = np.asarray(phi, float)
     d_delta = np.diff(delta, axis=0)
     d_phi = np.diff(phi, axis=0)
     mid = delta[:-1] + 0.5 * d_delta
-    step = base_twist(platform, mid, d_delta, d_phi)  # displacements in the base frame
-    theta = np.concatenate([[0.0], np.cumsum(step[:, 2])])
+    a, b = constraint_system(platform, mid, d_delta, d_phi)
+    qm, rm = np.linalg.qr(a)
+    rhs = np.einsum("nji,nj->ni", qm, b)
+    step = np.linalg.solve(rm, rhs[..., None])[..., 0]  # displacements in the base frame
+    pose0 = np.zeros(3) if start is None else np.asarray(start.pose, float)
+    theta = np.cumsum(np.concatenate([pose0[2:], step[:, 2]]))
     heading = theta[:-1] + 0.5 * step[:, 2]
     c, s = np.cos(heading), np.sin(heading)
     dx = c * step[:, 0] - s * step[:, 1]
     dy = s * step[:, 0] + c * step[:, 1]
-    pose = np.zeros((delta.shape[0], 3))
-    pose[1:, 0] = np.cumsum(dx)
-    pose[1:, 1] = np.cumsum(dy)
+    pose = np.empty((delta.shape[0], 3))
+    pose[:, 0] = np.cumsum(np.concatenate([pose0[:1], dx]))
+    pose[:, 1] = np.cumsum(np.concatenate([pose0[1:2], dy]))
     pose[:, 2] = theta
-    return pose
+    return pose, corr
+
+
+def odometry(platform: Platform, delta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Base pose (x_b, y_b, θ_b) [m, m, rad] from encoder angles; (N, 3), zero at sample 0.
+
+    ``delta`` (N, n) pivot angles (wrapped or not) and ``phi`` (N, n, 2) wheel angles,
+    unwrapped. See :func:`odometry_from` to continue from a pose reached earlier.
+    """
+    return odometry_from(platform, delta, phi)[0]

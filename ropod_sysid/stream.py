@@ -46,20 +46,18 @@ from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel
+from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_from
 from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import (
     GRID_STEPS,
-    OdometryState,
     Preprocessed,
     Span,
     block_triangles,
     grid_step,
     jitter_note,
-    odometry_from,
     on_grid,
     raw_system,
-    unwrap_from,
 )
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
