@@ -12,7 +12,8 @@ from ropod_sysid.io.csvlog import read_numeric_table
 from ropod_sysid.io.paramfile import read_truth_parameters
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
-from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, Setpoints, simulate
+from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, simulate
+from ropod_sysid.trajectory import read_trajectory_csv
 
 
 @click.command("simulate", short_help="Simulate a run with known parameters; write its log.")
@@ -59,8 +60,7 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     platform = load_platform(platform_path)
     values = read_truth_parameters(params_path, platform.unit_names)
     params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
-    cols = read_numeric_table(traj_path, ["t", "vx", "vy", "omega"])
-    setpoints = Setpoints(cols["t"], cols["vx"], cols["vy"], cols["omega"])
+    setpoints = read_trajectory_csv(traj_path).to_setpoints()
     force = None
     if force_path is not None:
         fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])

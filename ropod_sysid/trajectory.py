@@ -29,7 +29,6 @@ regressor's condition number and rank and each parameter's predicted standard de
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -38,6 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.io.atomic import atomic_write_text
+from ropod_sysid.io.csvlog import read_numeric_table
 from ropod_sysid.platform import Platform, ropod_platform
 from ropod_sysid.simulate import Setpoints
 
@@ -220,8 +221,6 @@ class Trajectory:
 
     def write_csv(self, path: str | Path) -> None:
         """Write ``t, vx, vy, omega, x, y, theta`` (header first, %.17g) atomically."""
-        from ropod_sysid.io.atomic import atomic_write_text
-
         atomic_write_text(path, trajectory_csv_text(self))
 
 
@@ -242,80 +241,13 @@ def read_trajectory_csv(path: str | Path) -> Trajectory:
     """Read a setpoint CSV: ``t, vx, vy, omega`` required, ``x, y, theta`` optional.
 
     Without the pose columns the pose is integrated from the twist. Extra columns are ignored.
-    Every problem raises :class:`InputError` with one line naming the file, line and column.
-    Line numbers count the header as line 1.
+    Every problem raises :class:`InputError` with one line naming the file, line and column
+    (the checks of the log reader, :func:`ropod_sysid.io.csvlog.read_numeric_table`).
     """
-    where = str(path)
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            rows = list(csv.reader(fh))
-    except FileNotFoundError:
-        raise InputError(f"{where}: no such trajectory file; check the path") from None
-    except IsADirectoryError:
-        raise InputError(f"{where}: is a directory, not a trajectory CSV file") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{where}: not a text CSV file (invalid UTF-8)") from None
-    except OSError as exc:
-        raise InputError(f"{where}: cannot read the trajectory ({exc.strerror or exc})") from None
-    except csv.Error as exc:
-        raise InputError(f"{where}: not a valid CSV file ({exc})") from None
-    if not rows or not any(cell.strip() for cell in rows[0]):
-        raise InputError(f"{where}: empty file; expected a header line "
-                         f"'{','.join(COLUMNS)}' and one row per setpoint")
-    header = [h.strip() for h in rows[0]]
-    missing = [c for c in TWIST_COLUMNS if c not in header]
-    if missing:
-        raise InputError(
-            f"{where}: line 1: missing column{'s' if len(missing) > 1 else ''} "
-            f"{', '.join(repr(c) for c in missing)}; the header needs t, vx, vy, omega "
-            "(optionally x, y, theta)")
-    pose_present = [c for c in POSE_COLUMNS if c in header]
-    if pose_present and len(pose_present) < 3:
-        absent = [c for c in POSE_COLUMNS if c not in header]
-        raise InputError(
-            f"{where}: line 1: column{'s' if len(absent) > 1 else ''} "
-            f"{', '.join(repr(c) for c in absent)} missing while "
-            f"{', '.join(repr(c) for c in pose_present)} present; give all of x, y, theta or none")
-    dupes = sorted({h for h in header if header.count(h) > 1 and h in COLUMNS})
-    if dupes:
-        raise InputError(f"{where}: line 1: column {dupes[0]!r} appears twice; keep one")
-    wanted = list(TWIST_COLUMNS) + (list(POSE_COLUMNS) if pose_present else [])
-    idx = [header.index(c) for c in wanted]
-    values: list[list[float]] = []
-    lines: list[int] = []
-    for lineno, row in enumerate(rows[1:], start=2):
-        if not row or not any(cell.strip() for cell in row):
-            continue  # blank line
-        if len(row) != len(header):
-            raise InputError(f"{where}: line {lineno}: {len(row)} fields, the header has "
-                             f"{len(header)}; every row needs one value per column")
-        out = []
-        for col, k in zip(wanted, idx, strict=True):
-            cell = row[k].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                raise InputError(f"{where}: line {lineno}, column '{col}': {cell!r} is not a "
-                                 "number") from None
-            if not math.isfinite(v):
-                raise InputError(f"{where}: line {lineno}, column '{col}': {cell!r} is not a "
-                                 "finite number; replace NaN/inf by a value")
-            out.append(v)
-        values.append(out)
-        lines.append(lineno)
-    if len(values) < 2:
-        raise InputError(f"{where}: {len(values)} data row{'s' if len(values) != 1 else ''}; a "
-                         "trajectory needs at least 2 setpoints")
-    data = np.array(values)
-    t = data[:, 0]
-    bad = np.flatnonzero(~(np.diff(t) > 0))
-    if bad.size:
-        k = int(bad[0])
-        raise InputError(f"{where}: line {lines[k + 1]}, column 't': t={float(t[k + 1])!r} is not "
-                         f"after t={float(t[k])!r} on line {lines[k]}; time must strictly increase")
-    if pose_present:
-        return Trajectory(*(np.ascontiguousarray(data[:, j]) for j in range(7)))
-    return Trajectory.from_twist(t, data[:, 1], data[:, 2], data[:, 3])
+    cols = read_numeric_table(path, list(TWIST_COLUMNS), optional=POSE_COLUMNS)
+    if "x" in cols:
+        return Trajectory(*(cols[c] for c in COLUMNS))
+    return Trajectory.from_twist(*(cols[c] for c in TWIST_COLUMNS))
 
 
 # ---------------------------------------------------------------------------------------------

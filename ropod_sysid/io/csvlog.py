@@ -18,7 +18,7 @@ import csv
 import gzip
 import math
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -212,13 +212,14 @@ def _check_time(path: Path, where: str, t: np.ndarray, row0: int = 0,
         )
 
 
-def read_numeric_table(path: str | Path, required: list[str],
+def read_numeric_table(path: str | Path, required: list[str], optional: Sequence[str] = (),
                        min_rows: int = 2) -> dict[str, np.ndarray]:
     """Read a numeric CSV table (setpoints, force schedules) with the log reader's checks.
 
     ``required`` names the columns to return; the first must be the time column ``t``, which
-    must strictly increase. Other columns are ignored. Errors are one line naming the file,
-    the line and the column.
+    must strictly increase. ``optional`` is a group of columns given all together or not at
+    all (returned when present). Other columns are ignored. Errors are one line naming the
+    file, the line and the column.
     """
     where = str(path)
     path = Path(path)
@@ -238,12 +239,21 @@ def read_numeric_table(path: str | Path, required: list[str],
             f"{', '.join(repr(c) for c in missing)} missing; the file needs the columns "
             f"{', '.join(required)} (header row first)"
         )
-    col_idx = [seen[c] for c in required]
+    present = [c for c in optional if c in seen]
+    if present and len(present) < len(optional):
+        absent = [c for c in optional if c not in seen]
+        raise InputError(
+            f"{where}: column{'s' if len(absent) > 1 else ''} "
+            f"{', '.join(repr(c) for c in absent)} missing while "
+            f"{', '.join(repr(c) for c in present)} present; give all of "
+            f"{', '.join(optional)} or none")
+    wanted = list(required) + present
+    col_idx = [seen[c] for c in wanted]
     data = _fast_read(path, len(names), col_idx)
     if data is None:
-        data = _diagnose(path, where, len(names), list(required), col_idx)
+        data = _diagnose(path, where, len(names), wanted, col_idx)
     _check_rows_and_time(path, where, data[0], min_rows)
-    return {c: np.ascontiguousarray(data[j]) for j, c in enumerate(required)}
+    return {c: np.ascontiguousarray(data[j]) for j, c in enumerate(wanted)}
 
 def _open(path: Path, where: str, binary: bool = False):
     """Open the log (binary, or as text with undecodable bytes shown as U+FFFD)."""
