@@ -325,7 +325,7 @@ def test_too_few_samples(tmp_path):
 def test_partial_pose(tmp_path):
     p = write(tmp_path, simple_lines(4, COLS + ["x_b", "y_b"]))
     assert error_of(p) == (f"{p}: column 'theta_b' missing while 'x_b', 'y_b' present; give "
-                           "all three of x_b, y_b, theta_b or none")
+                           "all of x_b, y_b, theta_b or none")
 
 
 def test_no_header_row(tmp_path):

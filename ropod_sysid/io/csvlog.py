@@ -131,15 +131,7 @@ def _layout(path: Path, where: str, platform: Platform
     names = [h.strip() for h in header]
     required = contract_columns(platform.unit_names)
     _check_columns(names, required, platform, where)
-    pose_present = [c for c in POSE_COLUMNS if c in names]
-    if pose_present and len(pose_present) < len(POSE_COLUMNS):
-        missing = [c for c in POSE_COLUMNS if c not in names]
-        raise InputError(
-            f"{where}: column{'s' if len(missing) > 1 else ''} "
-            f"{', '.join(repr(c) for c in missing)} missing while "
-            f"{', '.join(repr(c) for c in pose_present)} present; give all three of x_b, y_b, "
-            "theta_b or none"
-        )
+    pose_present = _all_or_none(names, POSE_COLUMNS, where)
     wanted = required + (list(POSE_COLUMNS) if pose_present else [])
     index = {name: k for k, name in enumerate(names)}
     return len(names), wanted, [index[c] for c in wanted], bool(pose_present)
@@ -212,6 +204,19 @@ def _check_time(path: Path, where: str, t: np.ndarray, row0: int = 0,
         )
 
 
+def _all_or_none(names: Sequence[str], group: Sequence[str], where: str) -> list[str]:
+    """The columns of ``group`` in the header, which must hold all of them or none."""
+    present = [c for c in group if c in names]
+    if present and len(present) < len(group):
+        absent = [c for c in group if c not in names]
+        raise InputError(
+            f"{where}: column{'s' if len(absent) > 1 else ''} "
+            f"{', '.join(repr(c) for c in absent)} missing while "
+            f"{', '.join(repr(c) for c in present)} present; give all of "
+            f"{', '.join(group)} or none")
+    return present
+
+
 def read_numeric_table(path: str | Path, required: list[str], optional: Sequence[str] = (),
                        min_rows: int = 2) -> dict[str, np.ndarray]:
     """Read a numeric CSV table (setpoints, force schedules) with the log reader's checks.
@@ -239,14 +244,7 @@ def read_numeric_table(path: str | Path, required: list[str], optional: Sequence
             f"{', '.join(repr(c) for c in missing)} missing; the file needs the columns "
             f"{', '.join(required)} (header row first)"
         )
-    present = [c for c in optional if c in seen]
-    if present and len(present) < len(optional):
-        absent = [c for c in optional if c not in seen]
-        raise InputError(
-            f"{where}: column{'s' if len(absent) > 1 else ''} "
-            f"{', '.join(repr(c) for c in absent)} missing while "
-            f"{', '.join(repr(c) for c in present)} present; give all of "
-            f"{', '.join(optional)} or none")
+    present = _all_or_none(names, optional, where)
     wanted = list(required) + present
     col_idx = [seen[c] for c in wanted]
     data = _fast_read(path, len(names), col_idx)
