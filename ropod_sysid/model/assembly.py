@@ -193,22 +193,28 @@ class PlatformModel:
         friction (56/57) and pivot friction (59/60) columns.
         """
         n = qdd.shape[0]
-        cols = [base.a_id_base(qdd)]
-        unit_cols = 0.0
+        n_units = self.n_units
+        n_fw, n_fp = (2, 2) if friction == "shared" else (4 * n_units, 2 * n_units)
+        out = np.empty((n, 3, 5 + n_fw + n_fp))
+        out[:, :, :2] = base.a_id_base(qdd)
+        out[:, :, 2:5] = 0.0
         for (_, group), data in zip(self.groups, st.units, strict=True):
-            unit_cols = unit_cols + group.a_id(data, qdd)
-        cols.append(np.broadcast_to(unit_cols, (n, 3, 3)))
+            out[:, :, 2:5] += group.a_id(data, qdd)
         phid, deltad = st.wheel_rate, st.pivot_rate
         a_fw = np.stack([phid, np.tanh(self.alpha * phid)], axis=-1)  # (N, n, 2, 2)
         a_fp = np.stack([deltad, np.tanh(self.alpha * deltad)], axis=-1)  # (N, n, 2)
         b_tau, b_tau_fp = st.b_tau, st.b_tau_fp
+        fw = out[:, :, 5:5 + n_fw]
+        fp = out[:, :, 5 + n_fw:]
         if friction == "shared":
-            cols.append(-np.einsum("ncuw,nuwf->ncf", b_tau, a_fw))
-            cols.append(-np.einsum("ncu,nuf->ncf", b_tau_fp, a_fp))
+            fw[...] = -np.einsum("ncuw,nuwf->ncf", b_tau, a_fw)
+            fp[...] = -np.einsum("ncu,nuf->ncf", b_tau_fp, a_fp)
         else:
-            cols.append(-np.einsum("ncuw,nuwf->ncuwf", b_tau, a_fw).reshape(n, 3, -1))
-            cols.append(-np.einsum("ncu,nuf->ncuf", b_tau_fp, a_fp).reshape(n, 3, -1))
-        return np.concatenate(cols, axis=2)
+            np.multiply(b_tau[..., None], a_fw[:, None], out=fw.reshape(n, 3, n_units, 2, 2))
+            np.negative(fw, out=fw)
+            np.multiply(b_tau_fp[..., None], a_fp[:, None], out=fp.reshape(n, 3, n_units, 2))
+            np.negative(fp, out=fp)
+        return out
 
     def b_id(self, st: State, tau: np.ndarray, f_b: np.ndarray | None = None) -> np.ndarray:
         """b_ID = B_Fb F_b + B_τ τ (eq. 35); (N, 3). F_b is zero in identification runs."""

@@ -46,6 +46,25 @@ def _pair(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def _b_times_inverse_rows(b: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """B [I2 0] A⁻¹ for stacks of 3×3 matrices A (…, 3, 3) and B (…, 3, 2).
+
+    A⁻¹ from the adjugate: its columns are a1×a2, a2×a0, a0×a1 over det A = a0·(a1×a2), with
+    a0, a1, a2 the rows of A (for A_iwh, det = −s_w: eq. 20 and the test of App. C); much
+    faster than a batched LAPACK inverse of many tiny matrices.
+    """
+    a0, a1, a2 = a[..., 0, :], a[..., 1, :], a[..., 2, :]
+    c0, c1, c2 = np.cross(a1, a2), np.cross(a2, a0), np.cross(a0, a1)
+    det = (a0 * c0).sum(-1)[..., None]
+    inv01 = np.empty((*a.shape[:-2], 2, 3))  # rows 0 and 1 of A⁻¹
+    for r in range(2):
+        inv01[..., r, 0] = c0[..., r]
+        inv01[..., r, 1] = c1[..., r]
+        inv01[..., r, 2] = c2[..., r]
+    inv01 /= det[..., None]
+    return b[..., :, 0, None] * inv01[..., None, 0, :] + b[..., :, 1, None] * inv01[..., None, 1, :]
+
+
 @dataclass
 class SwivelData:
     """Per-sample parametrisations of k swivel units (shapes (N, k, …)).
@@ -226,7 +245,7 @@ class SwivelUnits:
         b_fixy[..., 2, 0] = -py
         b_fixy[..., 2, 1] = px
         # G = B_Fixy [I2 0] A_iwh⁻¹: F_ixy of (22)/(63) enters (32)/(64) through it
-        g = b_fixy @ np.linalg.inv(a_iwh)[..., :2, :]
+        g = _b_times_inverse_rows(b_fixy, a_iwh)
         b_tau = -np.moveaxis(g @ a_iwh2, 2, 1) / self.r_w  # (N, 3, k, 2): eqs. 22, 29, 31, 32
         b_tau_fp = np.moveaxis(g[..., 2], 1, 2).copy()  # (64): (I + G) e3
         b_tau_fp[:, 2, :] += 1.0
