@@ -119,7 +119,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
             click.echo(msg, err=True)
 
     result = fit_files(list(logs), platform, options, workers=workers,
-                       dask_address=dask_address)
+                       dask_address=dask_address, quiet=quiet)
     loaded = None
     if report_path is not None:
         # the report plots every sample: it needs the logs in memory

@@ -12,12 +12,14 @@ without ``workers`` and ``address`` everything runs serially in this process.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.progress import Progress
 
 INSTALL_HINT = "pip install 'ropod-sysid[dask]'"
 CONNECT_TIMEOUT = "20s"  # to reach an existing scheduler
@@ -34,8 +36,14 @@ def _dask() -> Any:
     return distributed
 
 
-def _serial(func: Callable[..., Any], items: Sequence[Any], **kwargs: Any) -> list:
-    return [func(item, **kwargs) for item in items]
+def _serial(func: Callable[..., Any], items: Sequence[Any], quiet: bool = True,
+            **kwargs: Any) -> list:
+    out = []
+    with Progress(len(items), "logs", quiet=quiet) as bar:
+        for item in items:
+            out.append(func(item, **kwargs))
+            bar.update()
+    return out
 
 
 class DaskPool:
@@ -104,12 +112,13 @@ class DaskPool:
 
 @contextlib.contextmanager
 def pool(workers: int | None = None, address: str | None = None,
-         processes: bool | None = None) -> Iterator[Run]:
+         processes: bool | None = None, quiet: bool = True) -> Iterator[Run]:
     """A ``run(func, items, **kwargs) -> list`` for the duration of the block: on Dask with
     ``workers`` or ``address``, else serial. One cluster serves every call (e.g. every delay
-    that ``--input-delay auto`` tries)."""
+    that ``--input-delay auto`` tries). Serially, a progress bar counts the logs on a terminal
+    unless ``quiet``."""
     if workers is None and address is None:
-        yield _serial
+        yield functools.partial(_serial, quiet=quiet)
         return
     with DaskPool(workers, address, processes) as p:
         yield p.map

@@ -177,7 +177,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
 def fit_files(paths: Sequence[str | Path], platform: Platform,
               options: FitOptions | None = None, workers: int | None = None,
               dask_address: str | None = None, chunk: int | None = None,
-              progress: Callable[[str], None] | None = None) -> FitResult:
+              progress: Callable[[str], None] | None = None, quiet: bool = True) -> FitResult:
     """Fit the dynamic parameters to log files, each read and reduced in chunks.
 
     Every log is streamed (:func:`ropod_sysid.stream.stream_log`: memory bounded by ``chunk``
@@ -197,7 +197,7 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     for p in paths:
         check_source(p, platform)
     say = progress or (lambda _msg: None)
-    with pool(workers, dask_address) as run:
+    with pool(workers, dask_address, quiet=quiet) as run:
         def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
                 + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
