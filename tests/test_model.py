@@ -176,3 +176,36 @@ def test_eight_unit_platform_needs_no_code_change():
     assert model.a_id_ext(st, np.ones((10, 3))).shape == (10, 3, 5 + 6 * 8)
     np.testing.assert_allclose(model.kinetic_energy(st, p),
                                0.5 * np.einsum("ni,nij,nj->n", qd, eom.m_dir, qd), rtol=1e-12)
+
+
+def test_mixed_unit_types_keep_platform_order(monkeypatch):
+    """Units of different types form separate groups; per-unit arrays (B_τ, B_τfp, rates)
+    still follow the platform file's order. A second type that is a swivel under another
+    name must give exactly the model of the all-swivel platform."""
+    from ropod_sysid import platform as platform_mod
+    from ropod_sysid.model import assembly
+    from ropod_sysid.model.swivel import SwivelUnits
+
+    class OtherSwivel(SwivelUnits):
+        pass
+
+    monkeypatch.setattr(platform_mod, "UNIT_TYPES", ("swivel", "other"))
+    monkeypatch.setattr(assembly, "UNIT_TYPES", {"swivel": SwivelUnits, "other": OtherSwivel})
+    data = ropod_platform().to_dict()
+    for k in (0, 2):
+        data["units"][k]["type"] = "other"
+    mixed = platform_from_dict(data, "<mixed>")
+    plain = ropod_platform()
+    m_mixed, m_plain = PlatformModel(mixed), PlatformModel(plain)
+    assert [len(idx) for idx, _ in m_mixed.groups] == [2, 2]
+    p = thesis_fixed_masses(plain.unit_names)
+    rng = np.random.default_rng(12)
+    q, qd, qdd = rng.normal(size=(3, 7, 3))
+    delta = rng.uniform(-3, 3, size=(7, 4))
+    s1, s2 = m_mixed.state(q, qd, delta), m_plain.state(q, qd, delta)
+    e1, e2 = m_mixed.direct_eom(s1, p), m_plain.direct_eom(s2, p)
+    for name in ("m_dir", "b_tau", "b_tau_fp", "b_dir", "tau_fw", "tau_fp"):
+        np.testing.assert_allclose(getattr(e1, name), getattr(e2, name), atol=1e-12)
+    np.testing.assert_allclose(m_mixed.a_id_ext(s1, qdd), m_plain.a_id_ext(s2, qdd), atol=1e-12)
+    np.testing.assert_allclose(m_mixed.joint_rates(q, qd, delta),
+                               m_plain.joint_rates(q, qd, delta), atol=1e-12)
