@@ -203,3 +203,32 @@ def test_other_bad_inputs(tmp_path, files, runs_off_square):
     one_line_error(run("fit", str(logs[0]), "--platform", str(bad_pf), "--out", str(out)),
                    "bad.yaml")
     assert not out.exists()
+
+
+def test_simulate_from_the_shipped_trajectory(tmp_path):
+    """The sample's setpoints read back as what `trajectory typical` makes, and `simulate`
+    turns them into a valid log (the first 2 s, to keep the test short)."""
+    from pathlib import Path
+
+    from ropod_sysid.io import read_log
+    from ropod_sysid.platform import load_platform
+    from ropod_sysid.trajectory import read_trajectory_csv, typical, variants
+
+    root = Path(__file__).resolve().parent.parent / "datasets" / "ropod"
+    platform = load_platform(root / "platform.yaml")
+    shipped = read_trajectory_csv(root / "trajectory" / "original.csv.gz")
+    fresh = variants(typical(duration=60.0, platform=platform, seed=0))["original"]
+    np.testing.assert_allclose(shipped.vx, fresh.vx, atol=1e-12)
+    np.testing.assert_allclose(shipped.omega, fresh.omega, atol=1e-12)
+    head = tmp_path / "head.csv"
+    keep = shipped.t <= 2.0
+    np.savetxt(head, np.column_stack([shipped.t[keep], shipped.vx[keep], shipped.vy[keep],
+                                      shipped.omega[keep]]),
+               delimiter=",", header="t,vx,vy,omega", comments="")
+    out = tmp_path / "run.mcap"
+    r = run("simulate", "--platform", str(root / "platform.yaml"), "--params",
+            str(root / "truth.json"), "--trajectory", str(head), "--out", str(out), "--quiet")
+    assert r.exit_code == 0, r.output
+    log = read_log(out, platform)
+    assert log.n_samples == 401 and log.units == ["1", "2", "3", "4"]
+    assert np.abs(log.phi[-1]).max() > 0.1 or np.abs(log.delta[-1]).max() > 0.1

@@ -3,9 +3,9 @@
     python datasets/ropod/make_dataset.py
 
 Writes, beside this script: ``platform.yaml`` (the data contract's ropod), ``truth.json`` (the
-parameters the simulation used) and ``original.csv.gz`` … ``mirrored_negated.csv.gz``, the
-four variants of thesis Sec. VI-A (their setpoints are ``ropod-sysid trajectory typical
---duration 60 --platform platform.yaml --out DIR``): 100 Hz logs with
+parameters the simulation used), ``trajectory/*.csv.gz`` (the setpoints of the four variants of
+thesis Sec. VI-A, as ``ropod-sysid trajectory typical --duration 60`` writes them) and
+``original.csv.gz`` … ``mirrored_negated.csv.gz``, their simulated runs: 100 Hz logs with
 2¹⁴-count encoders, 30 mA current noise and 0.5 ms timestamp jitter. Values are rounded far
 below the sensor resolution (angles to 1e-7 rad, currents to 1e-5 A, time to 1 µs) and
 gzip-compressed, which keeps the set under 5 MB. Takes a few minutes (RK4 at 1 kHz).
@@ -14,16 +14,18 @@ gzip-compressed, which keeps the set under 5 MB. Takes a few minutes (RK4 at 1 k
 from __future__ import annotations
 
 import dataclasses
+import gzip
 import json
 from pathlib import Path
 
 import numpy as np
 
 from ropod_sysid.io import write_log
+from ropod_sysid.io.atomic import atomic_write_bytes
 from ropod_sysid.params import thesis_fixed_masses
 from ropod_sysid.platform import ropod_platform, save_platform
 from ropod_sysid.simulate import Sensors, simulate
-from ropod_sysid.trajectory import typical, variants
+from ropod_sysid.trajectory import trajectory_csv_text, typical, variants
 
 HERE = Path(__file__).resolve().parent
 RATE = 100.0
@@ -37,6 +39,10 @@ def main() -> None:
     (HERE / "truth.json").write_text(
         json.dumps(truth.to_mapping(platform.unit_names), indent=2) + "\n")
     runs = variants(typical(duration=60.0, platform=platform, seed=0))
+    (HERE / "trajectory").mkdir(exist_ok=True)
+    for name, traj in runs.items():
+        data = gzip.compress(trajectory_csv_text(traj).encode("utf-8"), mtime=0)
+        atomic_write_bytes(HERE / "trajectory" / f"{name}.csv.gz", data)
     results = simulate(platform, truth, [tr.to_setpoints() for tr in runs.values()],
                        rate=RATE, sensors=SENSORS, quiet=False)
     for name, res in zip(runs, results, strict=True):
