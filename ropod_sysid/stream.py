@@ -30,9 +30,7 @@ low-pass keeps its filter state across blocks.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import math
-import os
 import queue
 import threading
 from collections.abc import Iterator
@@ -41,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy import signal as _signal
+from threadpoolctl import threadpool_limits
 
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
@@ -205,65 +204,33 @@ def _prefetch(chunks: Iterator[Log], depth: int = 2) -> Iterator[Log]:
 # BLAS threads
 
 
-def _blas_libraries() -> list[tuple[ctypes.CDLL, str, str]]:
-    """Loaded OpenBLAS builds with their thread-count setter and getter (Linux)."""
-    found = []
-    try:
-        with open("/proc/self/maps") as f:
-            paths = sorted({ln.split()[-1] for ln in f if "openblas" in ln.lower()})
-    except OSError:
-        return found
-    for path in paths:
-        if not os.path.exists(path):
-            continue
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        names = [(f"{prefix}_set_num_threads{tail}", f"{prefix}_get_num_threads{tail}")
-                 for prefix in ("scipy_openblas", "openblas") for tail in ("", "64_")]
-        for setter, getter in names:
-            if hasattr(lib, setter) and hasattr(lib, getter):
-                found.append((lib, setter, getter))
-                break
-    return found
-
-
 _blas_lock = threading.Lock()
 _blas_users = 0
-_blas_saved: list[tuple[ctypes.CDLL, str, int]] = []
+_blas_limits: threadpool_limits | None = None
 
 
 @contextlib.contextmanager
 def single_thread_blas() -> Iterator[None]:
-    """Run the block computations with one BLAS thread.
+    """Run the block computations with one BLAS thread (threadpoolctl).
 
     The blocks are tall and thin (QR leaves of 256 × 30, batched 3 × 3 solves); threaded
     OpenBLAS gains nothing there and, on a busy machine, loses several-fold to spinning
     threads. The setting is process-wide: the first of concurrent users (e.g. Dask worker
-    threads) sets it, the last restores it. Best effort: without a recognisable OpenBLAS
-    nothing changes.
+    threads) sets it, the last restores it.
     """
-    global _blas_users
+    global _blas_users, _blas_limits
     with _blas_lock:
         if _blas_users == 0:
-            for lib, setter, getter in _blas_libraries():
-                try:
-                    n = int(getattr(lib, getter)())
-                    getattr(lib, setter)(1)
-                    _blas_saved.append((lib, setter, n))
-                except (OSError, ValueError):  # pragma: no cover - a foreign build
-                    continue
+            _blas_limits = threadpool_limits(limits=1, user_api="blas")
         _blas_users += 1
     try:
         yield
     finally:
         with _blas_lock:
             _blas_users -= 1
-            if _blas_users == 0:
-                for lib, setter, n in _blas_saved:
-                    getattr(lib, setter)(n)
-                _blas_saved.clear()
+            if _blas_users == 0 and _blas_limits is not None:
+                _blas_limits.restore_original_limits()
+                _blas_limits = None
 
 
 # ---------------------------------------------------------------------------------------------
