@@ -105,6 +105,15 @@ def command() -> None:
     """
 
 
+def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    """--dt and --out of the commands that write a run and its variants."""
+    func = click.option("--out", "out", required=True, type=click.Path(file_okay=False),
+                        help="Directory for original.csv, mirrored.csv, negated.csv, "
+                             "mirrored_negated.csv.")(func)
+    return click.option("--dt", default=0.005, show_default=True, type=float,
+                        help="Setpoint sample interval [s].")(func)
+
+
 @command.command("typical", short_help="A typical run (corners, rotations, lateral moves).")
 @limit_options
 @click.option("--duration", default=60.0, show_default=True, type=float,
@@ -113,11 +122,7 @@ def command() -> None:
               help="Platform YAML for the pivot-rate prediction [default: the ropod].")
 @click.option("--seed", default=0, show_default=True, type=int,
               help="0: the reference run; other seeds vary speeds and lobe order.")
-@click.option("--dt", default=0.005, show_default=True, type=float,
-              help="Setpoint sample interval [s].")
-@click.option("--out", "out", required=True, type=click.Path(file_okay=False),
-              help="Directory for original.csv, mirrored.csv, negated.csv, "
-                   "mirrored_negated.csv.")
+@output_options
 @quiet_option
 @reports_errors
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
@@ -154,11 +159,7 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
 @click.option("--maxiter", default=25, show_default=True, type=int,
               help="Generations of the search (differential evolution).")
-@click.option("--dt", default=0.005, show_default=True, type=float,
-              help="Setpoint sample interval [s].")
-@click.option("--out", "out", required=True, type=click.Path(file_okay=False),
-              help="Directory for original.csv, mirrored.csv, negated.csv, "
-                   "mirrored_negated.csv.")
+@output_options
 @quiet_option
 @reports_errors
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
