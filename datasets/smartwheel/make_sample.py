@@ -35,7 +35,7 @@ import numpy as np
 
 from ropod_sysid.io.smartwheel import write_smartwheel
 from ropod_sysid.params import thesis_fixed_masses
-from ropod_sysid.platform import platform_from_dict, save_platform
+from ropod_sysid.platform import platform_from_dict, ropod_platform, save_platform
 from ropod_sysid.simulate import Sensors, Setpoints, simulate
 
 HERE = Path(__file__).resolve().parent
@@ -44,21 +44,14 @@ RATE = 200.0
 EPOCH_NS = 836_123_456_789_012_345          # an EtherCAT clock reading (ns since 2000)
 SENSORS = Sensors()    # exact sensors: the sample is about the layout, a fit recovers the truth
 
-PLATFORM = {
-    "name": "ropod",
-    "wheel_radius": 0.0525,
-    "wheel_distance": 0.08,
-    "caster_offset": 0.01,
-    "hub_com_offset": -0.005,
-    "torque_constant": 0.28,
-    "friction_tanh_gain": 10.0,
-    "units": [
-        {"name": "1", "pivot": [0.22, 0.20], "pivot_offset": 0.35},
-        {"name": "2", "pivot": [-0.20, 0.22], "left_motor": 2, "pivot_offset": -1.2},
-        {"name": "3", "pivot": [-0.21, -0.19], "sign_right": -1, "pivot_offset": 2.6},
-        {"name": "4", "pivot": [0.20, -0.22], "pivot_offset": -0.05},
-    ],
-}
+# the contract's ropod with the pivots 1–2 cm off the square and the robot's per-unit quirks:
+# a pivot calibration on every unit, swapped motors on unit 2, a flipped right motor on unit 3
+PLATFORM = ropod_platform().to_dict() | {"units": [
+    {"name": "1", "pivot": [0.22, 0.20], "pivot_offset": 0.35},
+    {"name": "2", "pivot": [-0.20, 0.22], "left_motor": 2, "pivot_offset": -1.2},
+    {"name": "3", "pivot": [-0.21, -0.19], "sign_right": -1, "pivot_offset": 2.6},
+    {"name": "4", "pivot": [0.20, -0.22], "pivot_offset": -0.05},
+]}
 
 
 def setpoints(duration: float = DURATION, dt: float = 0.01) -> Setpoints:
