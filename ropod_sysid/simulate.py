@@ -51,9 +51,10 @@ class ForceSchedule:
     t: np.ndarray
     f: np.ndarray  # (M, 3)
 
-    def at(self, t: float) -> np.ndarray:
-        return np.array([np.interp(t, self.t, self.f[:, j], left=0.0, right=0.0)
-                         for j in range(3)])
+    def at(self, t: np.ndarray | float) -> np.ndarray:
+        """Linearly interpolated force (…, 3); zero outside the schedule."""
+        return np.stack([np.interp(t, self.t, self.f[:, j], left=0.0, right=0.0)
+                         for j in range(3)], axis=-1)
 
 
 @dataclass(frozen=True)
@@ -173,11 +174,16 @@ def simulate(platform: Platform, params: DynamicParameters,
         qdd = model.forward_dynamics(st, params, tau, f_b)
         return qd, qdd, st.pivot_rate, st.wheel_rate
 
+    # setpoints and external force on the step grid, interpolated once: (steps + 1, runs, 3)
+    grid = t0[None, :] + dt * np.arange(steps + 1)[:, None]
+    sp_all = np.stack([r.at(grid[:, k]) for k, r in enumerate(runs)], axis=1)
+    f_all = None if force is None else np.stack([force.at(grid[:, k]) for k in range(n_runs)],
+                                                axis=1)
+
     with Progress(steps, "simulate", quiet=quiet) as bar:
         for step in range(steps + 1):
-            t = t0 + step * dt
             # controller (zero-order hold over the step): IK for the current pivot angles
-            sp = np.stack([runs[r].at(t[r]) for r in range(n_runs)])
+            sp = sp_all[step]
             c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
             qd_set = np.stack([c * sp[:, 0] - s * sp[:, 1], s * sp[:, 0] + c * sp[:, 1],
                                sp[:, 2]], axis=-1)
@@ -188,9 +194,7 @@ def simulate(platform: Platform, params: DynamicParameters,
             tau = np.clip(tau_raw, -controller.torque_limit, controller.torque_limit)
             saturated = tau != tau_raw
             integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
-            f_b = None
-            if force is not None:
-                f_b = np.stack([force.at(t[r]) for r in range(n_runs)])
+            f_b = None if f_all is None else f_all[step]
             k1 = deriv(q, qd, delta, tau, f_b, st)
             if step % stride == 0:
                 k = step // stride
