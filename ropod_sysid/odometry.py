@@ -45,6 +45,37 @@ def constraint_system(platform: Platform, delta: np.ndarray, delta_rate: np.ndar
     return a.reshape(n_s, 3 * n_u, 3), b.reshape(n_s, 3 * n_u)
 
 
+def normal_equations(platform: Platform, delta: np.ndarray, delta_rate: np.ndarray,
+                     phi_rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """AᵀA (N, 3, 3) and Aᵀb (N, 3) of :func:`constraint_system`, summed over the units
+    without forming the (3n × 3) rows.
+
+    Unit i contributes its rows L = (c, s, f − d_w/2), R = (c, s, f + d_w/2) and
+    S = (−s, c, g), with f = x s_δ − y c_δ and g = x c_δ + y s_δ − s_w (eqs. 11, 8a).
+    """
+    p = platform.pivots
+    x, y = p[:, 0], p[:, 1]
+    r_w, d_w, s_w = platform.wheel_radius, platform.wheel_distance, platform.caster_offset
+    c, s = np.cos(delta), np.sin(delta)
+    f = x * s - y * c
+    g = x * c + y * s - s_w
+    b_sum = r_w * (phi_rate[..., 0] + phi_rate[..., 1])  # b_L + b_R
+    b_diff = r_w * (phi_rate[..., 1] - phi_rate[..., 0]) - d_w * delta_rate  # b_R − b_L
+    b_s = s_w * delta_rate
+    ata = np.empty(delta.shape[:1] + (3, 3))
+    ata[:, 0, 0] = (1.0 + c * c).sum(axis=1)
+    ata[:, 0, 1] = ata[:, 1, 0] = (c * s).sum(axis=1)
+    ata[:, 0, 2] = ata[:, 2, 0] = (2.0 * c * f - s * g).sum(axis=1)
+    ata[:, 1, 1] = (1.0 + s * s).sum(axis=1)
+    ata[:, 1, 2] = ata[:, 2, 1] = (2.0 * s * f + c * g).sum(axis=1)
+    ata[:, 2, 2] = (2.0 * f * f + g * g).sum(axis=1) + delta.shape[1] * d_w * d_w / 2
+    atb = np.empty(delta.shape[:1] + (3,))
+    atb[:, 0] = (c * b_sum - s * b_s).sum(axis=1)
+    atb[:, 1] = (s * b_sum + c * b_s).sum(axis=1)
+    atb[:, 2] = (f * b_sum + d_w / 2 * b_diff + g * b_s).sum(axis=1)
+    return ata, atb
+
+
 def base_twist(platform: Platform, delta: np.ndarray, delta_rate: np.ndarray,
                phi_rate: np.ndarray) -> np.ndarray:
     """Least-squares base twist (v_x, v_y, ω) in the base frame [m/s, rad/s]; (N, 3)."""
@@ -65,13 +96,32 @@ def unwrap_from(p: np.ndarray, corr0: np.ndarray | None = None,
     period = 2 * np.pi
     low, high = -period / 2, period / 2
     dd = np.diff(p, axis=0)
-    ddmod = np.mod(dd - low, period) + low
-    np.copyto(ddmod, high, where=(ddmod == low) & (dd > 0))
-    ph = ddmod - dd
-    np.copyto(ph, 0, where=np.abs(dd) < high)
+    ph = np.zeros_like(dd)
+    jump = np.abs(dd) >= high  # numpy's rule: smaller steps get no correction
+    if jump.any():
+        d = dd[jump]
+        ddmod = np.mod(d - low, period) + low
+        np.copyto(ddmod, high, where=(ddmod == low) & (d > 0))
+        ph[jump] = ddmod - d
     start = np.zeros_like(p[:1]) if corr0 is None else np.asarray(corr0, float)[None]
     corr = np.cumsum(np.concatenate([start, ph]), axis=0)
     return p + corr, corr
+
+
+def solve_symmetric3(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """x with m x = v for symmetric 3 × 3 matrices ``m`` (N, 3, 3) and ``v`` (N, 3), by the
+    adjugate (the normal equations of the constraints are well conditioned: the 3n rows span
+    the plane's twists with O(1) coefficients)."""
+    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    d, e, f = m[:, 1, 1], m[:, 1, 2], m[:, 2, 2]
+    adj_a, adj_b, adj_c = d * f - e * e, c * e - b * f, b * e - c * d
+    adj_d, adj_e, adj_f = a * f - c * c, b * c - a * e, a * d - b * b
+    inv_det = 1.0 / (a * adj_a + b * adj_b + c * adj_c)
+    x = np.empty_like(v)
+    x[:, 0] = (adj_a * v[:, 0] + adj_b * v[:, 1] + adj_c * v[:, 2]) * inv_det
+    x[:, 1] = (adj_b * v[:, 0] + adj_d * v[:, 1] + adj_e * v[:, 2]) * inv_det
+    x[:, 2] = (adj_c * v[:, 0] + adj_e * v[:, 1] + adj_f * v[:, 2]) * inv_det
+    return x
 
 
 @dataclass
@@ -88,20 +138,18 @@ def odometry_from(platform: Platform, delta: np.ndarray, phi: np.ndarray,
     """Base pose (N, 3) from smoothed encoder angles, as :func:`ropod_sysid.odometry.odometry`,
     continued from ``start`` at sample 0 (None: the pose is zero there).
 
-    The per-interval least squares on the no-slip constraints is solved by a batched QR of the
-    (3n × 3) constraint matrices; the pose is the sequential cumulative sum of the displacements
-    from the start pose, so that a log cut into overlapping pieces gives the pose of one pass.
-    Returns the pose and the unwrapping corrections of δ per sample (for :class:`OdometryState`).
+    The per-interval least squares on the no-slip constraints is solved by its 3 × 3 normal
+    equations (:func:`solve_symmetric3`); the pose is the sequential cumulative sum of the
+    displacements from the start pose, so that a log cut into overlapping pieces gives the pose
+    of one pass. Returns the pose and the unwrapping corrections of δ per sample (for
+    :class:`OdometryState`).
     """
     delta, corr = unwrap_from(delta, None if start is None else start.unwrap)
     phi = np.asarray(phi, float)
     d_delta = np.diff(delta, axis=0)
     d_phi = np.diff(phi, axis=0)
     mid = delta[:-1] + 0.5 * d_delta
-    a, b = constraint_system(platform, mid, d_delta, d_phi)
-    qm, rm = np.linalg.qr(a)
-    rhs = np.einsum("nji,nj->ni", qm, b)
-    step = np.linalg.solve(rm, rhs[..., None])[..., 0]  # displacements in the base frame
+    step = solve_symmetric3(*normal_equations(platform, mid, d_delta, d_phi))  # base frame
     pose0 = np.zeros(3) if start is None else np.asarray(start.pose, float)
     theta = np.cumsum(np.concatenate([pose0[2:], step[:, 2]]))
     heading = theta[:-1] + 0.5 * step[:, 2]
