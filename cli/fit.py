@@ -61,13 +61,27 @@ def parse_delay(text: str) -> str | float:
     return d
 
 
+def parse_row_step(text: str) -> int | None:
+    if text == "auto":
+        return None
+    try:
+        step = int(text)
+    except ValueError:
+        step = 0
+    if step < 1:
+        raise InputError(f"--row-step {text!r}: use auto or a positive whole number of samples "
+                         "(1 = every sample)")
+    return step
+
+
 def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_rotation: str,
-                physical: bool, input_delay: str, rcond: float) -> FitOptions:
+                physical: bool, input_delay: str, rcond: float,
+                row_step: str = "auto") -> FitOptions:
     return FitOptions(friction=friction,  # type: ignore[arg-type]
                       span=Span.parse(span), fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
                       physical=physical, input_delay=parse_delay(input_delay),  # type: ignore
-                      rcond=rcond)
+                      rcond=rcond, row_step=parse_row_step(row_step))
 
 
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
@@ -81,6 +95,9 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
               show_default=True, help="Friction coefficients per wheel and pivot, or shared.")
 @click.option("--span", default=None,
               help="LOESS span: samples (21) or seconds (0.1s). Default 0.1s.")
+@click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
+              help="Form an equation row every N samples; auto: about ten per span (every "
+                   "10th sample at 1 kHz with 0.1s, every sample at 100 Hz). 1 = every sample.")
 @click.option("--fix", multiple=True, metavar="NAME=VALUE",
               help="Hold a parameter fixed (repeatable), e.g. the weighed masses.")
 @click.option("--weight-rotation", default="auto", show_default=True,
@@ -102,7 +119,8 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
 @quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
-            span: str | None, fix: tuple[str, ...], weight_rotation: str, physical: bool,
+            span: str | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
+            physical: bool,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
             validate_logs: tuple[str, ...], workers: int | None, dask_address: str | None,
             quiet: bool) -> None:
@@ -112,7 +130,8 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
     platform = load_platform(platform_path)
-    options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond)
+    options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
+                          row_step)
 
     def say(msg: str) -> None:
         if not quiet:

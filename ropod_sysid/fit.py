@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import scipy.optimize
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
@@ -40,6 +39,7 @@ class FitOptions:
     input_delay: float | Literal["auto"] = 0.0
     rcond: float = RCOND
     max_delay: float = 0.05
+    row_step: int | None = None  # samples between equation rows; None: ~10 per span
 
 
 @dataclass
@@ -47,7 +47,7 @@ class LogFit:
     """One log's share of the fit."""
 
     source: str
-    samples: int
+    samples: int  # log samples the fit's rows cover
     weight: float
     rms: dict[str, float]
     notes: list[str]
@@ -98,9 +98,10 @@ class FitResult:
         extras: dict[str, object] = {
             "friction": self.options.friction,
             "span": str(self.options.span),
+            "row_step": self.options.row_step or "auto",
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
-            "logs": [{"file": lf.source, "samples": lf.samples,
+            "logs": [{"file": lf.source, "samples": lf.samples, "rows": lf.triangles.rows,
                       "rms": {"translation": lf.rms["translation"],
                               "rotation": lf.rms["rotation"]}} for lf in self.logs],
         }
@@ -167,7 +168,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
         out = []
         for log in logs:
             say(f"preprocess {log.source}")
-            pre = preprocess(log, platform, options.span, delay)
+            pre = preprocess(log, platform, options.span, delay, options.row_step)
             out.append((log.source, triangles(model, pre, options.friction), pre.notes))
         return out
 
@@ -203,7 +204,7 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
                 + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
             parts = run(log_triangles, paths, platform=platform, span=options.span,
                         input_delay=delay, friction=options.friction,
-                        chunk=chunk or DEFAULT_CHUNK)
+                        chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step)
             return [(p, tri, notes) for p, (tri, notes) in zip(paths, parts, strict=True)]
 
         return _fit(reduce, platform, options)
@@ -219,7 +220,9 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
             sol, _ = fit_systems([tri for _, tri, _ in reduce(d)], names, options)
             return sol.sigma2
 
-        res = scipy.optimize.minimize_scalar(cost, bounds=(0.0, options.max_delay),
+        from scipy.optimize import minimize_scalar  # imported here: only the delay search
+
+        res = minimize_scalar(cost, bounds=(0.0, options.max_delay),
                                              method="bounded", options={"xatol": 2e-4})
         delay = float(res.x)
     else:
@@ -227,7 +230,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     reduced = reduce(delay)
     systems = [tri for _, tri, _ in reduced]
     solution, weights = fit_systems(systems, names, options)
-    per_log = [LogFit(source, tri.rows, w, tri.rms(solution.values), notes, tri)
+    per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri)
                for (source, tri, notes), w in zip(reduced, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log,
                        combined_rms(systems, solution.values), delay)

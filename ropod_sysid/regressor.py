@@ -6,6 +6,15 @@ tracker columns), velocities and accelerations by central differences; currents 
 torque constant give the wheel torques. The rows of A_ID,ext and b_ID are then filtered with the
 same LOESS on both sides of the equation, and the ends, where the smoother's window is
 shifted, are trimmed.
+
+Equation rows are taken every :class:`RowGrid` ``step`` samples (by default about ten per
+smoother span: every 10th sample of a 1 kHz log at ``--span 0.1s``, every sample of a 100 Hz
+one). The smoothed states hardly change between neighbouring samples, so rows closer than
+that repeat each other; forming every one of them is most of the cost of a fast log. The
+torques of a row are averaged over the step around it (the same boxcar that would act on the
+smooth states changes them by less than the rounding of the encoders), and the rows' LOESS
+covers the same time span as the samples' (:meth:`RowGrid.span`), so both sides of eq. 36 are
+still filtered alike. ``step=1`` gives the sample-by-sample system.
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ DEFAULT_SPAN_S = 0.1
 QR_LEAF_ROWS = 256  # rows per leaf QR of a block's TSQR (small: fast, cache-resident)
 GRID_STEPS = 10_000  # the sample time is the median of the first this many steps
 UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
+ROWS_PER_SPAN = 10  # default row grid: about this many equation rows per smoother span
 
 
 def grid_step(t: np.ndarray) -> float:
@@ -89,6 +99,40 @@ class Span:
         return f"{self.value:g}s" if self.seconds else f"{int(self.value)} samples"
 
 
+@dataclass(frozen=True)
+class RowGrid:
+    """Which samples become equation rows, and the LOESS window of the rows.
+
+    ``step``: samples between rows; ``span``: the rows' LOESS window in rows, odd, covering
+    the smoother span of ``k`` samples (``k`` itself when ``step`` is 1).
+    """
+
+    step: int
+    span: int
+
+    @classmethod
+    def for_span(cls, k: int, step: int | None = None) -> RowGrid:
+        """The grid for a smoother span of ``k`` samples: ``step`` samples apart, or by
+        default ⌊k / :data:`ROWS_PER_SPAN`⌋ (at least 1)."""
+        if step is not None and (int(step) != step or step < 1):
+            raise InputError(f"--row-step {step!r}: give a positive whole number of samples "
+                             "(1 = every sample) or leave it out for about ten rows per span")
+        d = int(step) if step is not None else max(1, k // ROWS_PER_SPAN)
+        kr = max(int(round(k / d)), 3)
+        return cls(d, kr if kr % 2 else kr + 1)
+
+    @property
+    def halo(self) -> int:
+        """Samples a run of rows needs on each side: the rows' half-window of LOESS, and
+        half a step for the torques' average."""
+        return self.step * ((self.span - 1) // 2) + self.step // 2
+
+    def trim(self, k: int) -> int:
+        """Samples dropped at each end of a log: the shifted end windows of the smoother
+        over ``k`` samples and of the rows' LOESS (``k`` when ``step`` is 1)."""
+        return (k - 1) // 2 + 1 + self.halo
+
+
 @dataclass
 class Preprocessed:
     """Smoothed signals of one log on a uniform grid, ends trimmed (shapes (M, …))."""
@@ -106,26 +150,36 @@ class Preprocessed:
     dt: float
     notes: list[str] = field(default_factory=list)
     trim: int = 0  # samples dropped at each end after filtering the equations
+    grid: RowGrid = field(default_factory=lambda: RowGrid(1, 3))
 
     def window(self, start: int, stop: int) -> Preprocessed:
         """Samples start:stop (untrimmed indices) as a new block."""
-        sl = slice(start, stop)
-        return Preprocessed(self.t[sl], self.q[sl], self.qd[sl], self.qdd[sl], self.delta[sl],
-                            self.delta_dot[sl], self.phi_dot[sl], self.tau[sl], self.source,
-                            self.span_samples, self.dt, self.notes, 0)
+        return self.take(slice(start, stop))
+
+    def take(self, index: slice | np.ndarray) -> Preprocessed:
+        """The samples at ``index`` (a slice or indices) as a new block, untrimmed."""
+        ix = index
+        return Preprocessed(self.t[ix], self.q[ix], self.qd[ix], self.qdd[ix], self.delta[ix],
+                            self.delta_dot[ix], self.phi_dot[ix], self.tau[ix], self.source,
+                            self.span_samples, self.dt, self.notes, 0, self.grid)
+
+    def row_samples(self) -> np.ndarray:
+        """Indices of the samples that become equation rows (after trimming)."""
+        return np.arange(self.trim, len(self.t) - self.trim, self.grid.step)
 
     @property
-    def n_samples(self) -> int:
-        """Samples that enter the fit (after trimming)."""
-        return len(self.t) - 2 * self.trim
+    def n_rows(self) -> int:
+        """Equation rows that enter the fit."""
+        return len(range(self.trim, len(self.t) - self.trim, self.grid.step))
 
 
 def preprocess(log: Log, platform: Platform, span: Span | None = None,
-               input_delay: float = 0.0) -> Preprocessed:
+               input_delay: float = 0.0, row_step: int | None = None) -> Preprocessed:
     """Smooth, differentiate and trim one log (Sec. VI-B).
 
     ``input_delay`` [s] shifts the torques: the torque logged at t acts on the motion at
-    t + delay.
+    t + delay. ``row_step``: samples between equation rows (:class:`RowGrid`; None: about ten
+    per smoother span).
     """
     span = span or Span.parse(None)
     notes = list(log.notes)
@@ -146,7 +200,8 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
         t = t_new
     n = len(t)
     k = span.samples(dt, n)
-    trim = k  # the shifted end windows of both filter stages
+    grid = RowGrid.for_span(k, row_step)
+    trim = grid.trim(k)  # the shifted end windows of both filter stages
     if n < 2 * trim + k:
         raise InputError(
             f"{log.source}: {n} samples are too few for a smoother span of {k} samples "
@@ -167,7 +222,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
         tau = np.stack([np.interp(t - input_delay, t, flat[:, j]) for j in range(flat.shape[1])],
                        axis=1).reshape(tau.shape)
     return Preprocessed(t, q, qd, qdd, delta_s, delta_dot, phi_dot, tau, log.source, k, dt,
-                        notes, trim)
+                        notes, trim, grid)
 
 
 def raw_system(model: PlatformModel, pre: Preprocessed,
@@ -177,26 +232,47 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
     return model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
 
 
-def system(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
-           chunk: int = 20000) -> Iterator[tuple[slice, np.ndarray, np.ndarray]]:
-    """Filtered A_ID,ext and b_ID in blocks of at most ``chunk`` kept samples.
+def row_inputs(pre: Preprocessed, index: np.ndarray) -> Preprocessed:
+    """The row samples ``index`` of a block: their states, and the torques averaged over the
+    ``step`` samples around each (an odd boxcar of 2⌊step/2⌋ + 1 samples)."""
+    h = pre.grid.step // 2
+    rows = pre.take(index)
+    if h:
+        win = np.lib.stride_tricks.sliding_window_view(pre.tau, 2 * h + 1, axis=0)
+        rows.tau = win[index - h].mean(axis=-1)
+    return rows
 
-    Both sides of eq. 36 pass through the same zero-phase LOESS, column by column, so that
-    fast events the smoother cannot follow (Coulomb friction switching at a wheel-rate zero
-    crossing, the speed loops' transients) are attenuated alike in A_ID,ext and b_ID. Blocks
-    overlap by the half window, which makes the result equal to filtering the whole log at
-    once. Yields (slice into the untrimmed samples, A (m, 3, p), b (m, 3)).
+
+def row_system(model: PlatformModel, pre: Preprocessed, first: int, count: int,
+               friction: Friction = "per-wheel") -> tuple[np.ndarray, np.ndarray]:
+    """Filtered A_ID,ext (count, 3, p) and b_ID (count, 3) of the ``count`` rows from sample
+    ``first`` of the block ``pre``, which holds :attr:`RowGrid.halo` samples beyond them.
+
+    The rows and the half-window of rows on each side are formed (:func:`row_inputs`,
+    :func:`raw_system`); both sides pass through the same zero-phase LOESS over the rows,
+    column by column, so that fast events the smoother cannot follow (Coulomb friction
+    switching at a wheel-rate zero crossing, the speed loops' transients) are attenuated alike
+    in A_ID,ext and b_ID.
     """
-    k = pre.span_samples
-    half = (k - 1) // 2
-    n = len(pre.t)
-    for start in range(pre.trim, n - pre.trim, chunk):
-        stop = min(start + chunk, n - pre.trim)
-        lo, hi = max(start - half, 0), min(stop + half, n)
-        a, b = raw_system(model, pre.window(lo, hi), friction)
-        a = signals.loess(a, k)
-        b = signals.loess(b, k)
-        yield slice(start, stop), a[start - lo: stop - lo], b[start - lo: stop - lo]
+    grid = pre.grid
+    h = (grid.span - 1) // 2
+    index = first + grid.step * np.arange(-h, count + h)
+    a, b = raw_system(model, row_inputs(pre, index), friction)
+    return signals.loess(a, grid.span)[h: h + count], signals.loess(b, grid.span)[h: h + count]
+
+
+def system(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
+           chunk: int = 20000) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Filtered A_ID,ext and b_ID (:func:`row_system`) in blocks of at most ``chunk`` rows.
+
+    Blocks overlap by the rows' half window, which makes the result equal to filtering the
+    whole log at once. Yields (sample indices of the rows (m,), A (m, 3, p), b (m, 3)).
+    """
+    rows = pre.row_samples()
+    for r0 in range(0, len(rows), chunk):
+        idx = rows[r0: r0 + chunk]
+        a, b = row_system(model, pre, int(idx[0]), len(idx), friction)
+        yield idx, a, b
 
 
 def filtered_system(model: PlatformModel, pre: Preprocessed,
@@ -236,4 +312,5 @@ def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")
+    tri.samples = len(pre.t) - 2 * pre.trim
     return tri

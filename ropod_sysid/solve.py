@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
-import scipy.optimize
 
 from ropod_sysid.errors import IdentifiabilityError, InputError
 
@@ -52,12 +51,14 @@ class Triangles:
     """QR triangles of one stacked system (a log), one per DOF row of the direct EOM.
 
     r : (3, p+1, p+1) triangles of [A_dof | b_dof] for dof = x, y, θ
-    rows : samples (rows per DOF)
+    rows : equation rows per DOF
+    samples : log samples those rows cover (after trimming; ``rows`` × the row step)
     """
 
     r: np.ndarray
     rows: int
     label: str = ""
+    samples: int = 0
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
@@ -68,7 +69,7 @@ class Triangles:
     def merge(self, other: Triangles) -> Triangles:
         """Append another block of rows of the same system (streaming)."""
         r = np.stack([stack_triangles([self.r[d], other.r[d]]) for d in range(3)])
-        return Triangles(r, self.rows + other.rows, self.label)
+        return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples)
 
     def mean_square_b(self) -> np.ndarray:
         """Mean square of b_ID per DOF (3,): ‖b‖² = ‖R e_b‖² (column norms are kept)."""
@@ -241,7 +242,9 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
 
     if bounds is not None:
         lo, hi = (np.asarray(v, float) for v in bounds)
-        res = scipy.optimize.lsq_linear(cs, d, bounds=(lo[free] * scale, hi[free] * scale),
+        from scipy.optimize import lsq_linear  # imported here: only bounded fits need it
+
+        res = lsq_linear(cs, d, bounds=(lo[free] * scale, hi[free] * scale),
                                         method="bvls", lsmr_tol="auto")
         values[free] = res.x / scale
 

@@ -12,10 +12,11 @@ block:
    ``t0 + k dt`` by linear interpolation continued across chunks — the grid of the in-memory
    path. A step off the grid found after the head restarts the pass in resampling mode;
 3. per block of kept samples [s, e): LOESS of the angles over the block with a halo of
-   2·(k−1)/2 + 2 samples (the smoother's half-window for the angles, two samples for the two
-   central differences, the half-window for A and b), odometry continued from the pose carried
-   from the previous block, central differences, A_ID,ext and b_ID, their LOESS, and the QR
-   triangles of the block's rows merged into the log's (TSQR).
+   (k−1)/2 + 2 + h samples (the smoother's half-window for the angles, two samples for the two
+   central differences, the rows' halo h = :attr:`ropod_sysid.regressor.RowGrid.halo`),
+   odometry continued from the pose carried from the previous block, central differences,
+   the rows of A_ID,ext and b_ID on the row grid (:class:`ropod_sysid.regressor.RowGrid`)
+   and their LOESS, and the QR triangles of the block's rows merged into the log's (TSQR).
 
 Every sample's value is computed from the same neighbours by the same formula as in one pass,
 so the triangles equal the in-memory ones to rounding (the FFT convolution of long windows is
@@ -38,7 +39,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import signal as _signal
 from threadpoolctl import threadpool_limits
 
 from ropod_sysid import signals
@@ -51,12 +51,13 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import (
     GRID_STEPS,
     Preprocessed,
+    RowGrid,
     Span,
     block_triangles,
     grid_step,
     jitter_note,
     on_grid,
-    raw_system,
+    row_system,
 )
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
@@ -409,13 +410,14 @@ class _Blocks:
 
     def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
-                 keep_series: bool) -> None:
+                 keep_series: bool, row_step: int | None = None) -> None:
         self.platform = platform
         self.model = PlatformModel(platform)
         self.span = span
         self.delay = float(input_delay)
         self.friction = friction
-        self.block = max(int(chunk), 1)
+        self.chunk = max(int(chunk), 1)
+        self.row_step = row_step
         self.source = source
         self.params = params
         self.keep_series = keep_series
@@ -431,10 +433,16 @@ class _Blocks:
         self.dt = dt
         self.k = self.span.samples(dt, 0)
         self.c = (self.k - 1) // 2
-        self.trim = self.k
+        self.grid = RowGrid.for_span(self.k, self.row_step)
+        self.halo = self.grid.halo
+        self.trim = self.grid.trim(self.k)
+        d = self.grid.step  # blocks start on the row grid
+        self.block = max(self.chunk // d, 1) * d
         self.s = self.trim  # next kept sample to reduce
         self.lookback = math.ceil(self.delay / dt) + 2 if self.delay else 0
         if self.params is not None:
+            from scipy import signal as _signal  # slow to import; only the observer needs it
+
             self.sos = _signal.butter(2, float(OBSERVER_CUTOFF_HZ), btype="low", fs=1.0 / dt,
                                       output="sos")
             self.m_params = self.params.vector(self.platform.unit_names, "per-wheel")
@@ -455,6 +463,7 @@ class _Blocks:
         self._drain(n)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
+        self.tri.samples = n - 2 * self.trim
         return self.tri, self.obs, n
 
     def _drain(self, n: int | None) -> None:
@@ -469,13 +478,13 @@ class _Blocks:
                 last = e == end
             else:
                 e = s + self.block
-                if e + 2 * c + 2 > self.avail:
+                if e + self.halo + 2 + c > self.avail:
                     return
                 last = False
             self._reduce(s, e, last, n)
             self.s = e
             # keep what the next block reaches back to
-            keep = max(0, min(e - 2 * c - 2, e - c - self.lookback))
+            keep = max(0, min(e - self.halo - 2 - c, e - self.halo - self.lookback))
             self._drop_before(keep)
 
     def _window(self, r0: int, r1: int) -> _Samples:
@@ -493,21 +502,21 @@ class _Blocks:
 
     def _reduce(self, s: int, e: int, last: bool, n: int | None) -> None:
         """Reduce kept samples [s, e) to triangles (and observer figures)."""
-        c, k, dt = self.c, self.k, self.dt
+        c, k, dt, halo = self.c, self.k, self.dt, self.halo
         first = s == self.trim
-        qa = 0 if first else s - c - 2  # first sample of the pose
-        r0 = max(0, min(qa - c, s - c - self.lookback))  # first raw sample
-        r1 = n if last else e + 2 * c + 2
+        qa = 0 if first else s - halo - 2  # first sample of the pose
+        r0 = max(0, min(qa - c, s - halo - self.lookback))  # first raw sample
+        r1 = n if last else e + halo + 2 + c
         assert r1 is not None
         w = self._window(r0, r1)
-        q1 = r1 if last else e + c + 2
+        q1 = r1 if last else e + halo + 2
         i0, i1 = qa - r0, q1 - r0
         delta = signals.loess(w.delta, k)[i0:i1]
         phi = signals.loess(w.phi, k)[i0:i1]
         if w.pose is None:
             q, corr = odometry_from(self.platform, delta, phi, None if first else self.odo)
             if not last:
-                j = (e - c - 2) - qa  # the next block's first pose sample
+                j = (e - halo - 2) - qa  # the next block's first pose sample
                 self.odo = OdometryState(q[j].copy(), corr[j].copy())
         else:
             q = signals.loess(w.pose, k)[i0:i1]
@@ -520,19 +529,18 @@ class _Blocks:
             flat = tau.reshape(len(w), -1)
             tau = np.stack([np.interp(w.t - self.delay, w.t, flat[:, j])
                             for j in range(flat.shape[1])], axis=1).reshape(tau.shape)
-        # samples [pa, pb) are preprocessed: A and b need [s - c, e + c); the observer, every
-        # sample from 0 to n
-        pa, pb = s - c, e + c
+        # samples [pa, pb) are preprocessed: the rows need [s - halo, e + halo); the
+        # observer, every sample from 0 to n
+        pa, pb = s - halo, e + halo
         oa, ob = (0 if first else s), (r1 if last else e)
         if self.obs is not None:
             pa, pb = min(pa, oa), max(pb, ob)
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
-                           phi_dot[jq], tau[jr], self.source, k, dt, [], 0)
-        a, b = raw_system(self.model, pre.window(s - c - pa, e + c - pa), self.friction)
-        a = signals.loess(a, k)[c: c + e - s]
-        b = signals.loess(b, k)[c: c + e - s]
+                           phi_dot[jq], tau[jr], self.source, k, dt, [], 0, self.grid)
+        a, b = row_system(self.model, pre, s - pa, len(range(s, e, self.grid.step)),
+                          self.friction)
         block = block_triangles(a, b, self.source)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
@@ -545,6 +553,8 @@ class _Blocks:
         f_b = self.model.disturbance(st, self.params, pre.qdd, pre.tau)
         if self.zi is None:
             self.zi = np.zeros((self.sos.shape[0], 2, f_b.shape[1]))
+        from scipy import signal as _signal
+
         f_hat, self.zi = _signal.sosfilt(self.sos, f_b, axis=0, zi=self.zi)
         lo = max(oa, self.trim) - oa
         hi = (ob - self.trim if last else ob) - oa
@@ -568,9 +578,10 @@ class _Blocks:
 
 def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
-          resample: bool, prefetch: bool) -> StreamResult:
+          resample: bool, prefetch: bool, row_step: int | None) -> StreamResult:
     name = source_name(source)
-    blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params, keep_series)
+    blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params, keep_series,
+                     row_step)
     grid = _Grid(name, resample, blocks)
     notes: list[str] = []
     chunks = iter_chunks(source, platform, chunk)
@@ -590,33 +601,37 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
 def stream_log(source: Source, platform: Platform, span: Span | None = None,
                input_delay: float = 0.0, friction: Friction = "per-wheel",
                chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
-               keep_series: bool = False, prefetch: bool = True) -> StreamResult:
+               keep_series: bool = False, prefetch: bool = True,
+               row_step: int | None = None) -> StreamResult:
     """One pass over a log (a file, or an in-memory :class:`Log`) in chunks of ``chunk``
     samples: its QR triangles per DOF, equal to ``triangles(model, preprocess(log, …))`` to
     rounding; with ``params`` also the disturbance observer's figures (``keep_series``: and
-    its low-passed series, O(N) memory).
+    its low-passed series, O(N) memory). ``row_step``: samples between equation rows
+    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span).
 
     ``prefetch`` reads the next chunk in a background thread while one is processed.
     """
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
+    RowGrid.for_span(3, row_step)  # a bad row step fails before the file is opened
     with single_thread_blas():
         try:
             return _pass(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, False, prefetch)
+                         keep_series, False, prefetch, row_step)
         except _OffGrid:
             # a step off the grid after the head: the log is jittered after all; again, on
             # the uniform grid from the start
             return _pass(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, True, prefetch)
+                         keep_series, True, prefetch, row_step)
 
 
 def log_triangles(source: Source, platform: Platform, span: Span | None = None,
                   input_delay: float = 0.0, friction: Friction = "per-wheel",
-                  chunk: int = DEFAULT_CHUNK) -> tuple[Triangles, list[str]]:
+                  chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
+                  ) -> tuple[Triangles, list[str]]:
     """A log's triangles and reading notes (the unit of work of a fit; runs on Dask workers)."""
-    res = stream_log(source, platform, span, input_delay, friction, chunk)
+    res = stream_log(source, platform, span, input_delay, friction, chunk, row_step=row_step)
     return res.triangles, res.notes
 
 
@@ -635,7 +650,7 @@ def validate_source(source: Source, platform: Platform, params: DynamicParameter
     t = np.concatenate(obs.t) if obs.t else np.zeros(0)
     f_hat = np.concatenate(obs.f_hat) if obs.f_hat else np.zeros((0, 3))
     return LogValidation(
-        source=res.source, samples=res.triangles.rows, rms=res.triangles.rms(m),
+        source=res.source, samples=res.triangles.samples, rms=res.triangles.rms(m),
         observer_rms={k: float(np.sqrt(obs.sum_sq[j] / count)) for j, k in enumerate(keys)},
         observer_max={k: float(obs.max_abs[j]) for j, k in enumerate(keys)},
         share_above={"force": obs.above_force / count, "torque": obs.above_torque / count},

@@ -64,7 +64,7 @@ def validate_log(log: Log, platform: Platform, params: DynamicParameters,
     t = pre.t[pre.trim: len(pre.t) - pre.trim]
     force = np.hypot(f_hat[:, 0], f_hat[:, 1])
     return LogValidation(
-        source=log.source, samples=tri.rows, rms=tri.rms(m),
+        source=log.source, samples=tri.samples, rms=tri.rms(m),
         observer_rms={k: float(np.sqrt(np.mean(f_hat[:, j] ** 2)))
                       for j, k in enumerate(("F_bx", "F_by", "T_bz"))},
         observer_max={k: float(np.max(np.abs(f_hat[:, j])))

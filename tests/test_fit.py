@@ -223,6 +223,6 @@ def test_filtering_in_blocks_equals_one_shot(off_square, runs_off_square):
     a1 = np.concatenate([a for _, a, _ in big])
     a2 = np.concatenate([a for _, a, _ in small])
     np.testing.assert_allclose(a2, a1, rtol=1e-12, atol=1e-12 * np.abs(a1).max())
-    assert a1.shape[0] == pre.n_samples
+    assert a1.shape[0] == pre.n_rows
     a_raw, _ = raw_system(model, pre)
     assert a_raw.shape[0] == len(pre.t)

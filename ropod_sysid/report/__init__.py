@@ -103,19 +103,21 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
                      f"file describes '{platform.name}'")
     span = span if span is not None else _span_of(pfile, where)
     delay = _delay_of(pfile, where)
+    row_step = _row_step_of(pfile, where)
     fixed = {k: values[k] for k in names
              if k in values and pfile.parameters[k].get("fixed") is True}
     extra_fixed = pfile.extras.get("fixed")
     if isinstance(extra_fixed, dict):
         fixed.update({str(k): float(v) for k, v in extra_fixed.items()
                       if str(k) in names and isinstance(v, int | float)})
-    options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay)
+    options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
+                         row_step=row_step)
 
     model = PlatformModel(platform)
     systems = []
     log_notes = []
     for log in logs:
-        pre = preprocess(log, platform, span, delay)
+        pre = preprocess(log, platform, span, delay, row_step)
         log_notes.append(pre.notes)
         systems.append(triangles(model, pre, friction))
     sol, weights = fit_systems(systems, names, options)
@@ -134,7 +136,7 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
             combinations[k] = f"{sol.combinations.get(k, '')} (with these logs)"
     solution = dataclasses.replace(sol, values=m, std=std, combination=combination,
                                    combinations=combinations, fixed=fixed)
-    per_log = [LogFit(log.source, s.rows, w, s.rms(m), n, s)
+    per_log = [LogFit(log.source, s.samples, w, s.rms(m), n, s)
                for log, s, w, n in zip(logs, systems, weights, log_notes, strict=True)]
     result = FitResult(platform, options, solution, per_log, combined_rms(systems, m), delay)
     if pfile.extras.get("physical") is True:
@@ -167,6 +169,16 @@ def _span_of(pfile: ParameterFile, where: str) -> Span:
     except InputError:
         raise InputError(f"{where}: key 'span' is {text!r}; expected e.g. '0.1s' or "
                          "'21 samples', or give --span") from None
+
+
+def _row_step_of(pfile: ParameterFile, where: str) -> int | None:
+    step = pfile.extras.get("row_step")
+    if step is None or step == "auto":
+        return None
+    if isinstance(step, bool) or not isinstance(step, int) or step < 1:
+        raise InputError(f"{where}: key 'row_step' must be 'auto' or a positive whole number "
+                         f"of samples, got {step!r}")
+    return step
 
 
 def _delay_of(pfile: ParameterFile, where: str) -> float:
@@ -254,13 +266,15 @@ def _log_views(result: FitResult, logs: Sequence[Log], shown: np.ndarray,
     friction = result.options.friction
     views, errs, vels = [], [], []
     for k, (log, lf) in enumerate(zip(logs, result.logs, strict=True)):
-        pre = preprocess(log, platform, result.options.span, result.input_delay)
-        n = len(pre.t)
-        kept = slice(pre.trim, n - pre.trim)
-        b = np.empty((n - 2 * pre.trim, 3))
+        pre = preprocess(log, platform, result.options.span, result.input_delay,
+                         result.options.row_step)
+        kept = pre.row_samples()
+        b = np.empty((len(kept), 3))
         fit = np.empty_like(b)
-        for sl, a_blk, b_blk in system(model, pre, friction):  # bounded memory
-            rows = slice(sl.start - pre.trim, sl.stop - pre.trim)
+        done = 0
+        for idx, a_blk, b_blk in system(model, pre, friction):  # bounded memory
+            rows = slice(done, done + len(idx))
+            done += len(idx)
             b[rows] = b_blk
             fit[rows] = a_blk @ shown
         t = pre.t[kept]
@@ -281,6 +295,7 @@ def _log_views(result: FitResult, logs: Sequence[Log], shown: np.ndarray,
             "rms": _dof_rms(err),
             "notes": list(lf.notes),
             "span_samples": pre.span_samples,
+            "row_step": pre.grid.step,
             "fig13": _png_uri(figures.fit_vs_measured(t, b, fit)),
             "inputs": _png_uri(figures.inputs(
                 log.t, pose, pre.t, pre.qd, np.unwrap(log.delta, axis=0),
