@@ -54,25 +54,31 @@ def normal_equations(platform: Platform, delta: np.ndarray, delta_rate: np.ndarr
     S = (−s, c, g), with f = x s_δ − y c_δ and g = x c_δ + y s_δ − s_w (eqs. 11, 8a).
     """
     p = platform.pivots
-    x, y = p[:, 0], p[:, 1]
+    x, y = p[:, :1], p[:, 1:]  # (n, 1): arrays below are unit-major (n, N), sums over units
     r_w, d_w, s_w = platform.wheel_radius, platform.wheel_distance, platform.caster_offset
-    c, s = np.cos(delta), np.sin(delta)
+    delta_t = np.ascontiguousarray(np.asarray(delta, float).T)
+    rate_t = np.ascontiguousarray(np.asarray(delta_rate, float).T)
+    phi_l = np.asarray(phi_rate, float)[..., 0].T
+    phi_r = np.asarray(phi_rate, float)[..., 1].T
+    c, s = np.cos(delta_t), np.sin(delta_t)
     f = x * s - y * c
     g = x * c + y * s - s_w
-    b_sum = r_w * (phi_rate[..., 0] + phi_rate[..., 1])  # b_L + b_R
-    b_diff = r_w * (phi_rate[..., 1] - phi_rate[..., 0]) - d_w * delta_rate  # b_R − b_L
-    b_s = s_w * delta_rate
-    ata = np.empty(delta.shape[:1] + (3, 3))
-    ata[:, 0, 0] = (1.0 + c * c).sum(axis=1)
-    ata[:, 0, 1] = ata[:, 1, 0] = (c * s).sum(axis=1)
-    ata[:, 0, 2] = ata[:, 2, 0] = (2.0 * c * f - s * g).sum(axis=1)
-    ata[:, 1, 1] = (1.0 + s * s).sum(axis=1)
-    ata[:, 1, 2] = ata[:, 2, 1] = (2.0 * s * f + c * g).sum(axis=1)
-    ata[:, 2, 2] = (2.0 * f * f + g * g).sum(axis=1) + delta.shape[1] * d_w * d_w / 2
-    atb = np.empty(delta.shape[:1] + (3,))
-    atb[:, 0] = (c * b_sum - s * b_s).sum(axis=1)
-    atb[:, 1] = (s * b_sum + c * b_s).sum(axis=1)
-    atb[:, 2] = (f * b_sum + d_w / 2 * b_diff + g * b_s).sum(axis=1)
+    b_sum = r_w * (phi_l + phi_r)  # b_L + b_R
+    b_diff = r_w * (phi_r - phi_l) - d_w * rate_t  # b_R − b_L
+    b_s = s_w * rate_t
+    n_units, n = delta_t.shape
+    cc = (c * c).sum(axis=0)
+    ata = np.empty((n, 3, 3))
+    ata[:, 0, 0] = n_units + cc
+    ata[:, 0, 1] = ata[:, 1, 0] = (c * s).sum(axis=0)
+    ata[:, 0, 2] = ata[:, 2, 0] = (2.0 * c * f - s * g).sum(axis=0)
+    ata[:, 1, 1] = 2 * n_units - cc  # Σ 1 + s² = Σ 2 − c²
+    ata[:, 1, 2] = ata[:, 2, 1] = (2.0 * s * f + c * g).sum(axis=0)
+    ata[:, 2, 2] = (2.0 * f * f + g * g).sum(axis=0) + n_units * d_w * d_w / 2
+    atb = np.empty((n, 3))
+    atb[:, 0] = (c * b_sum - s * b_s).sum(axis=0)
+    atb[:, 1] = (s * b_sum + c * b_s).sum(axis=0)
+    atb[:, 2] = (f * b_sum + d_w / 2 * b_diff + g * b_s).sum(axis=0)
     return ata, atb
 
 
