@@ -219,14 +219,16 @@ def _interior(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """``valid`` correlation of each column of ``y2`` with a symmetric kernel: ``(N-k+1, m)``."""
     n, k = y2.shape[0], kernel.size
     c = (k - 1) // 2
-    if k <= _DIRECT_MAX_K or not np.isfinite(y2).all():
+    # (a NaN or inf sample makes its column's sum non-finite: one cheap pass over the data)
+    if k <= _DIRECT_MAX_K or not np.isfinite(y2.sum(axis=0)).all():
         # Direct: NaN/inf only reach outputs whose window holds them.
         return ndimage.correlate1d(y2, kernel, axis=0, mode="nearest")[c : n - c]
-    # Overlap-save FFT. The kernel reproduces straight lines, so removing each channel's line
-    # through its end samples first keeps the FFT round-off relative to the signal's variation,
-    # not to its offset or drift (an encoder angle that keeps turning).
-    line = y2[0] + (y2[-1] - y2[0]) * (np.arange(n) / max(n - 1, 1))[:, None]
-    return _overlap_save(y2 - line, kernel) + line[c : n - c]
+    # Overlap-save FFT. The kernel reproduces constants, so removing each channel's first
+    # sample keeps the FFT round-off relative to the signal's variation, not to its offset.
+    offset = y2[0].copy()
+    out = _overlap_save(y2 - offset, kernel)
+    out += offset
+    return out
 
 
 def _overlap_save(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:

@@ -34,7 +34,9 @@ import contextlib
 import math
 import queue
 import threading
-from collections.abc import Iterator
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -68,6 +70,7 @@ from ropod_sysid.validate import (
 )
 
 DEFAULT_CHUNK = 50_000  # samples per chunk read and per block of kept samples
+ROWS_IN_FLIGHT = 2  # blocks whose rows the worker thread may still be reducing
 Source = str | Path | Log
 
 
@@ -410,7 +413,8 @@ class _Blocks:
 
     def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
-                 keep_series: bool, row_step: int | None = None) -> None:
+                 keep_series: bool, row_step: int | None = None, threaded: bool = True,
+                 ) -> None:
         self.platform = platform
         self.model = PlatformModel(platform)
         self.span = span
@@ -428,6 +432,11 @@ class _Blocks:
         self.odo: OdometryState | None = None
         self.obs = ObserverStats() if params is not None else None
         self.zi: np.ndarray | None = None
+        # the rows of block i are reduced in a worker thread while block i+1 is smoothed (numpy
+        # releases the GIL in its loops); one worker keeps the merge order of the triangles
+        self.worker = (ThreadPoolExecutor(1, thread_name_prefix="ropod-sysid-rows")
+                       if threaded else None)
+        self.pending: deque[Future[None]] = deque()
 
     def start(self, dt: float) -> None:
         self.dt = dt
@@ -461,10 +470,29 @@ class _Blocks:
                 f"{self.source}: {n} samples are too few for a smoother span of {k} samples "
                 f"({k * self.dt:.3g} s); record a longer run or use a shorter --span")
         self._drain(n)
+        self._wait(0)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
         self.tri.samples = n - 2 * self.trim
         return self.tri, self.obs, n
+
+    def close(self) -> None:
+        """Stop the worker thread (also after an error: queued blocks are dropped)."""
+        if self.worker is not None:
+            self.worker.shutdown(wait=True, cancel_futures=True)
+            self.worker = None
+
+    def _submit(self, work: Callable[..., None], *args: object) -> None:
+        if self.worker is None:
+            work(*args)
+            return
+        self.pending.append(self.worker.submit(work, *args))
+        self._wait(ROWS_IN_FLIGHT)
+
+    def _wait(self, in_flight: int) -> None:
+        """Wait until at most ``in_flight`` blocks are pending; their errors surface here."""
+        while len(self.pending) > in_flight:
+            self.pending.popleft().result()
 
     def _drain(self, n: int | None) -> None:
         c = self.c
@@ -539,12 +567,18 @@ class _Blocks:
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
                            phi_dot[jq], tau[jr], self.source, k, dt, [], 0, self.grid)
-        a, b = row_system(self.model, pre, s - pa, len(range(s, e, self.grid.step)),
-                          self.friction)
+        self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)),
+                     pre.window(oa - pa, ob - pa) if self.obs is not None else None, oa, ob,
+                     last)
+
+    def _rows(self, pre: Preprocessed, first: int, count: int, observed: Preprocessed | None,
+              oa: int, ob: int, last: bool) -> None:
+        """The block's rows to its triangles, merged in order (and the observer's samples)."""
+        a, b = row_system(self.model, pre, first, count, self.friction)
         block = block_triangles(a, b, self.source)
         self.tri = block if self.tri is None else self.tri.merge(block)
-        if self.obs is not None:
-            self._observe(pre.window(oa - pa, ob - pa), oa, ob, last)
+        if observed is not None:
+            self._observe(observed, oa, ob, last)
 
     def _observe(self, pre: Preprocessed, oa: int, ob: int, last: bool) -> None:
         """The disturbance observer (eq. 40, causal 10 Hz low-pass) on samples [oa, ob)."""
@@ -581,20 +615,23 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
           resample: bool, prefetch: bool, row_step: int | None) -> StreamResult:
     name = source_name(source)
     blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params, keep_series,
-                     row_step)
-    grid = _Grid(name, resample, blocks)
-    notes: list[str] = []
-    chunks = iter_chunks(source, platform, chunk)
-    if prefetch and not isinstance(source, Log):
-        chunks = _prefetch(chunks)
-    seen = False
-    for log in chunks:
-        if not seen:
-            notes.extend(log.notes)
-            seen = True
-        grid.push(log)
-    notes += grid.finish()
-    tri, obs, n = blocks.finish()
+                     row_step, threaded=prefetch)
+    try:
+        grid = _Grid(name, resample, blocks)
+        notes: list[str] = []
+        chunks = iter_chunks(source, platform, chunk)
+        if prefetch and not isinstance(source, Log):
+            chunks = _prefetch(chunks)
+        seen = False
+        for log in chunks:
+            if not seen:
+                notes.extend(log.notes)
+                seen = True
+            grid.push(log)
+        notes += grid.finish()
+        tri, obs, n = blocks.finish()
+    finally:
+        blocks.close()
     return StreamResult(name, tri, notes, n, blocks.dt, blocks.k, obs)
 
 
@@ -609,7 +646,8 @@ def stream_log(source: Source, platform: Platform, span: Span | None = None,
     its low-passed series, O(N) memory). ``row_step``: samples between equation rows
     (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span).
 
-    ``prefetch`` reads the next chunk in a background thread while one is processed.
+    ``prefetch`` reads the next chunk in a background thread while one is processed, and
+    reduces a block's rows in another while the next block is smoothed.
     """
     span = span or Span.parse(None)
     if chunk < 1:
