@@ -58,8 +58,8 @@ def normal_equations(platform: Platform, delta: np.ndarray, delta_rate: np.ndarr
     r_w, d_w, s_w = platform.wheel_radius, platform.wheel_distance, platform.caster_offset
     delta_t = np.ascontiguousarray(np.asarray(delta, float).T)
     rate_t = np.ascontiguousarray(np.asarray(delta_rate, float).T)
-    phi_l = np.asarray(phi_rate, float)[..., 0].T
-    phi_r = np.asarray(phi_rate, float)[..., 1].T
+    phi_t = np.ascontiguousarray(np.moveaxis(np.asarray(phi_rate, float), 0, -1))  # (n, 2, N)
+    phi_l, phi_r = phi_t[:, 0], phi_t[:, 1]
     c, s = np.cos(delta_t), np.sin(delta_t)
     f = x * s - y * c
     g = x * c + y * s - s_w
