@@ -433,7 +433,7 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
                     piece, rest = buf[:cut], buf[cut:]
                 else:
                     piece, rest = buf, b""
-                if piece.strip():
+                if piece and not piece.isspace():  # (strip() would copy the piece)
                     yield _parse_piece(piece, include, read_options, parse_options,
                                        convert_options)
                 if not data:
