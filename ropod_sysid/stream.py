@@ -69,7 +69,7 @@ from ropod_sysid.validate import (
     LogValidation,
 )
 
-DEFAULT_CHUNK = 50_000  # samples per chunk read and per block of kept samples
+DEFAULT_CHUNK = 30_000  # samples per chunk read and per block (25–30k measured fastest)
 ROWS_IN_FLIGHT = 2  # blocks whose rows the worker thread may still be reducing
 Source = str | Path | Log
 
