@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
@@ -513,6 +512,8 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
     """:func:`_diagnose` block by block: yields the data of clean blocks as (k, m) arrays and
     raises :class:`InputError` at the first bad line (a wrong field count only once the rows
     after it show it is not the truncated last line)."""
+    import pyarrow.compute as pc  # only the slow, checked path needs it
+
     arrow_names = [f"c{k}" for k in range(n_fields)]
     skipped: list[int] = []                 # lines Arrow did not turn into rows, ascending
     invalid: list[tuple[int, int]] = []     # (line, fields) of non-blank wrong-length rows
