@@ -286,3 +286,14 @@ def test_other_formats_are_read_whole_and_reduced_in_chunks(tmp_path, off_square
     ref = fit_logs([read_log(p, off_square)], off_square)
     fit = fit_files([p], off_square, chunk=300)
     assert_same_values(ref, fit)
+
+
+def test_grid_step_averages_out_jitter_and_keeps_gaps():
+    """The sample time is the slope of the head's times, not its median step: ±1 ms of
+    jitter at 100 Hz leaves 2e-6 of the step, dropped samples keep their place."""
+    rng = np.random.default_rng(11)
+    t = np.arange(6001) * 0.01 + rng.uniform(-1e-3, 1e-3, 6001)
+    t = np.delete(t, [50, 51, 52, 3000])
+    assert abs(regressor.grid_step(t) - 0.01) < 2e-8
+    assert abs(float(np.median(np.diff(t))) - 0.01) > 1e-7  # what the median step gives
+    assert regressor.grid_step(np.arange(500) * 0.005) == pytest.approx(0.005, rel=1e-14)
