@@ -145,7 +145,14 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
     weights = _weights(systems, options.weight_rotation)
     r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
     rows = 3 * sum(s.rows for s in systems)
-    return solve(r, rows, names, options.fix, options.rcond), weights
+    return solve(r, rows, names, options.fix, options.rcond,
+                 correlation=mean_correlation(systems)), weights
+
+
+def mean_correlation(systems: Sequence[Triangles]) -> float:
+    """The logs' :attr:`Triangles.correlation`, weighted by their rows."""
+    rows = sum(s.rows for s in systems)
+    return sum(s.rows * s.correlation for s in systems) / rows if rows else 1.0
 
 
 Reduce = Callable[[float], list[tuple[str, Triangles, list[str]]]]
@@ -237,6 +244,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     if options.physical:
         r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
         result.physical = solve(r, 3 * sum(s.rows for s in systems), names, options.fix,
-                                options.rcond, bounds=physical_bounds(names))
+                                options.rcond, bounds=physical_bounds(names),
+                                correlation=mean_correlation(systems))
         result.physical_rms = combined_rms(systems, result.physical.values)
     return result

@@ -44,10 +44,11 @@ def grid_step(t: np.ndarray) -> float:
     """Sample time [s] of a log, from its first :data:`GRID_STEPS` time steps.
 
     The least-squares slope of those sample times against their sample numbers, each step
-    counted as its whole number of median steps (so that a dropped sample keeps its place). The slope averages out timestamp jitter that a median step keeps: a 100 Hz log
-    with ±1 ms jitter gets 0.01 s, not 0.009997 s. Only the head of the log is used, so that a
-    streaming pass (:mod:`ropod_sysid.stream`) knows the grid after one chunk and chooses
-    exactly the grid of the in-memory path.
+    counted as its whole number of median steps (so that a dropped sample keeps its place).
+    The slope averages out timestamp jitter that a median step keeps: a 100 Hz log with ±1 ms
+    jitter gets 0.01 s, not 0.009997 s. Only the head of the log is used, so that a streaming
+    pass (:mod:`ropod_sysid.stream`) knows the grid after one chunk and chooses exactly the
+    grid of the in-memory path.
     """
     head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
     steps = np.diff(head)
@@ -137,6 +138,15 @@ class RowGrid:
         """Samples a run of rows needs on each side: the rows' half-window of LOESS, and
         half a step for the torques' average."""
         return self.step * ((self.span - 1) // 2) + self.step // 2
+
+    @property
+    def correlation(self) -> float:
+        """Rows per independent row after the rows' LOESS: 1/Σh² of its kernel h (a residual
+        white before the filter is correlated over the window after it; the standard
+        deviations grow by the square root, :class:`ropod_sysid.solve.Triangles`)."""
+        if self.span <= 3:  # the LOESS of three samples returns them unchanged
+            return 1.0
+        return float(1.0 / np.sum(signals.loess_kernel(self.span) ** 2))
 
     def trim(self, k: int) -> int:
         """Samples dropped at each end of a log: the shifted end windows of the smoother
@@ -324,4 +334,5 @@ def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")
     tri.samples = len(pre.t) - 2 * pre.trim
+    tri.correlation = pre.grid.correlation
     return tri

@@ -53,12 +53,15 @@ class Triangles:
     r : (3, p+1, p+1) triangles of [A_dof | b_dof] for dof = x, y, θ
     rows : equation rows per DOF
     samples : log samples those rows cover (after trimming; ``rows`` × the row step)
+    correlation : rows per independent row: the LOESS over the rows makes neighbours share
+        their noise (1/Σh² of its kernel h, for a residual white before that filter)
     """
 
     r: np.ndarray
     rows: int
     label: str = ""
     samples: int = 0
+    correlation: float = 1.0
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
@@ -69,7 +72,8 @@ class Triangles:
     def merge(self, other: Triangles) -> Triangles:
         """Append another block of rows of the same system (streaming)."""
         r = np.stack([stack_triangles([self.r[d], other.r[d]]) for d in range(3)])
-        return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples)
+        return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples,
+                         self.correlation)
 
     def mean_square_b(self) -> np.ndarray:
         """Mean square of b_ID per DOF (3,): ‖b‖² = ‖R e_b‖² (column norms are kept)."""
@@ -113,8 +117,8 @@ class Solution:
     """A least-squares fit and how well the data determine it.
 
     values : (p,) parameter values (fixed ones included, as given)
-    std : (p,) standard deviations σ̂ √diag((AᵀA)⁻¹) of the weighted system; NaN when fixed or
-        determined only in combination
+    std : (p,) standard deviations σ̂ √(c diag((AᵀA)⁻¹)) of the weighted system, c the rows'
+        ``correlation`` (:class:`Triangles`); NaN when fixed or determined only in combination
     singular_values : of the column-scaled free regressor (descending)
     rank : numerical rank of the column-scaled free regressor
     condition_number : σ_max/σ_min of the column-scaled free regressor; when it is rank
@@ -151,12 +155,15 @@ class Solution:
 
 def solve(r: np.ndarray, rows: int, names: Sequence[str],
           fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
-          bounds: tuple[np.ndarray, np.ndarray] | None = None) -> Solution:
+          bounds: tuple[np.ndarray, np.ndarray] | None = None,
+          correlation: float = 1.0) -> Solution:
     """Solve min ‖A m − b‖ from the triangle ``r`` of [A | b] (weighted, stacked).
 
     Parameters
     ----------
     r : (p+1, p+1) triangle; ``rows`` : number of rows it summarises (for σ̂²)
+    correlation : rows per independent row (:attr:`Triangles.correlation`): the covariance of
+        the values is σ̂² (AᵀA)⁻¹ times it
     fixed : name → value held fixed (moved to the right-hand side)
     rcond : singular values of the column-scaled regressor below ``rcond·σ_max`` count as zero;
         those directions are reported in the null space and their dependent parameters are
@@ -233,7 +240,7 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     dof = max(rows - len(cols), 1)
     sigma2 = resid_ss / dof
     rinv = scipy.linalg.solve_triangular(rb, np.eye(len(cols)))
-    cov_s = sigma2 * rinv @ rinv.T
+    cov_s = correlation * sigma2 * rinv @ rinv.T
     idx = [free[j] for j in cols]
     values[idx] = y / scale[cols]
     cov_b = cov_s / np.outer(scale[cols], scale[cols])

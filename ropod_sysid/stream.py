@@ -474,6 +474,7 @@ class _Blocks:
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
         self.tri.samples = n - 2 * self.trim
+        self.tri.correlation = self.grid.correlation
         return self.tri, self.obs, n
 
     def close(self) -> None:

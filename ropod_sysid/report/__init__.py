@@ -29,7 +29,7 @@ import numpy as np
 
 from ropod_sysid import __version__
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, FitResult, LogFit, fit_systems
+from ropod_sysid.fit import FitOptions, FitResult, LogFit, fit_systems, mean_correlation
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
@@ -412,6 +412,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
                      "torque_constant": platform.torque_constant},
         "logs": log_views,
         "samples": int(sum(v["samples"] for v in log_views)),
+        "correlation": mean_correlation([lf.triangles for lf in result.logs]),
         "span": str(result.options.span),
         "friction": result.options.friction,
         "rms": rms,
