@@ -35,13 +35,13 @@ def test_exact_logs_recover_every_parameter(off_square, truth, runs_off_square):
 
 
 def test_noisy_logs_errors_are_covered_by_std(off_square, truth, runs_off_square_noisy):
-    """2¹⁴-count encoders, 30 mA current noise: the errors stay within a few standard
-    deviations, which is what the parameter file's std promises."""
+    """2¹⁴-count encoders, 30 mA current noise: the errors stay within the standard
+    deviations the parameter file promises (measured: at most 1.7σ, median 0.4σ)."""
     fit = fit_logs(runs_off_square_noisy, off_square)
     true = truth.vector(off_square.unit_names)
     sol = fit.solution
     z = np.abs(sol.values - true) / sol.std
-    assert np.all(z < 5), dict(zip(sol.names, z.round(1), strict=True))
+    assert np.all(z < 3), dict(zip(sol.names, z.round(1), strict=True))
     # the effective translational inertia m_b + 4 m_wh + 8 J_rot/R_w² is well determined
     rw = off_square.wheel_radius
     eff = lambda v: v[0] + 4 * v[2] + 8 * v[4] / rw**2  # noqa: E731
