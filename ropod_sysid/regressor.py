@@ -253,10 +253,11 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
     return model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
 
 
-def row_inputs(pre: Preprocessed, index: np.ndarray) -> Preprocessed:
+def row_inputs(pre: Preprocessed, index: np.ndarray, step: int | None = None) -> Preprocessed:
     """The row samples ``index`` of a block: their states, and the torques averaged over the
-    ``step`` samples around each (an odd boxcar of 2⌊step/2⌋ + 1 samples)."""
-    h = pre.grid.step // 2
+    ``step`` samples around each (an odd boxcar of 2⌊step/2⌋ + 1 samples; default: the row
+    grid's step)."""
+    h = (pre.grid.step if step is None else step) // 2
     rows = pre.take(index)
     if h:
         win = np.lib.stride_tricks.sliding_window_view(pre.tau, 2 * h + 1, axis=0)

@@ -59,6 +59,7 @@ from ropod_sysid.regressor import (
     grid_step,
     jitter_note,
     on_grid,
+    row_inputs,
     row_system,
 )
 from ropod_sysid.solve import Triangles
@@ -67,6 +68,8 @@ from ropod_sysid.validate import (
     OBSERVER_CUTOFF_HZ,
     TORQUE_THRESHOLD,
     LogValidation,
+    observer_samples,
+    observer_step,
 )
 
 DEFAULT_CHUNK = 30_000  # samples per chunk read and per block (25–30k measured fastest)
@@ -452,8 +455,9 @@ class _Blocks:
         if self.params is not None:
             from scipy import signal as _signal  # slow to import; only the observer needs it
 
-            self.sos = _signal.butter(2, float(OBSERVER_CUTOFF_HZ), btype="low", fs=1.0 / dt,
-                                      output="sos")
+            self.obs_step = observer_step(dt, self.grid.step)
+            self.sos = _signal.butter(2, float(OBSERVER_CUTOFF_HZ), btype="low",
+                                      fs=1.0 / (dt * self.obs_step), output="sos")
             self.m_params = self.params.vector(self.platform.unit_names, "per-wheel")
 
     def push(self, samples: _Samples) -> None:
@@ -568,32 +572,34 @@ class _Blocks:
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
                            phi_dot[jq], tau[jr], self.source, k, dt, [], 0, self.grid)
-        self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)),
-                     pre.window(oa - pa, ob - pa) if self.obs is not None else None, oa, ob,
+        self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)), pa, oa, ob,
                      last)
 
-    def _rows(self, pre: Preprocessed, first: int, count: int, observed: Preprocessed | None,
-              oa: int, ob: int, last: bool) -> None:
+    def _rows(self, pre: Preprocessed, first: int, count: int, pa: int, oa: int, ob: int,
+              last: bool) -> None:
         """The block's rows to its triangles, merged in order (and the observer's samples)."""
         a, b = row_system(self.model, pre, first, count, self.friction)
         block = block_triangles(a, b, self.source)
         self.tri = block if self.tri is None else self.tri.merge(block)
-        if observed is not None:
-            self._observe(observed, oa, ob, last)
+        if self.obs is not None:
+            self._observe(pre, pa, oa, ob, last)
 
-    def _observe(self, pre: Preprocessed, oa: int, ob: int, last: bool) -> None:
-        """The disturbance observer (eq. 40, causal 10 Hz low-pass) on samples [oa, ob)."""
+    def _observe(self, pre: Preprocessed, pa: int, oa: int, ob: int, last: bool) -> None:
+        """The disturbance observer (eq. 40, causal 10 Hz low-pass) on its samples in
+        [oa, ob) (:func:`ropod_sysid.validate.observer_samples`); ``pre`` starts at ``pa``."""
         assert self.obs is not None and self.params is not None
-        st = self.model.state(pre.q, pre.qd, pre.delta, pre.delta_dot)
-        f_b = self.model.disturbance(st, self.params, pre.qdd, pre.tau)
+        step = self.obs_step
+        idx = observer_samples(oa, ob - step // 2 if last else ob, step)
+        at = row_inputs(pre, idx - pa, step)
+        st = self.model.state(at.q, at.qd, at.delta, at.delta_dot)
+        f_b = self.model.disturbance(st, self.params, at.qdd, at.tau)
         if self.zi is None:
             self.zi = np.zeros((self.sos.shape[0], 2, f_b.shape[1]))
         from scipy import signal as _signal
 
         f_hat, self.zi = _signal.sosfilt(self.sos, f_b, axis=0, zi=self.zi)
-        lo = max(oa, self.trim) - oa
-        hi = (ob - self.trim if last else ob) - oa
-        f_hat = f_hat[lo:hi]
+        keep = (idx >= self.trim) & ((idx < ob - self.trim) if last else True)
+        f_hat, t_kept = f_hat[keep], at.t[keep]
         obs = self.obs
         obs.sum_sq += (f_hat ** 2).sum(axis=0)
         if len(f_hat):
@@ -603,7 +609,7 @@ class _Blocks:
         obs.above_torque += int(np.count_nonzero(np.abs(f_hat[:, 2]) > TORQUE_THRESHOLD))
         obs.count += len(f_hat)
         if self.keep_series:
-            obs.t.append(pre.t[lo:hi].copy())
+            obs.t.append(t_kept.copy())
             obs.f_hat.append(f_hat.copy())
 
 

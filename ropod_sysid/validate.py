@@ -17,7 +17,7 @@ from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Preprocessed, Span, preprocess, triangles
+from ropod_sysid.regressor import Preprocessed, Span, preprocess, row_inputs, triangles
 
 FORCE_THRESHOLD = 40.0  # N, Sec. VII-C
 TORQUE_THRESHOLD = 10.0  # N m
@@ -43,14 +43,35 @@ class LogValidation:
                 "share_above_threshold": self.share_above}
 
 
+def observer_step(dt: float, row_step: int, cutoff_hz: float = OBSERVER_CUTOFF_HZ) -> int:
+    """Samples between the observer's evaluations: the fit's row step, as long as that keeps
+    the observer's rate at least five times its cut-off (100 Hz for a 1 kHz log)."""
+    return max(1, min(int(row_step), int(1.0 / (5.0 * cutoff_hz * dt))))
+
+
+def observer_samples(start: int, stop: int, step: int) -> np.ndarray:
+    """The observer's sample indices in [start, stop): ⌊step/2⌋ + step·j, so that each has
+    the half step of samples before it that its torque average needs."""
+    h = step // 2
+    first = h + step * max(0, -(-(start - h) // step))
+    return np.arange(first, stop, step)
+
+
 def disturbance_estimate(model: PlatformModel, pre: Preprocessed, params: DynamicParameters,
-                         cutoff_hz: float = OBSERVER_CUTOFF_HZ) -> np.ndarray:
-    """F̂_b (M, 3) in the base frame: eq. 40 on the preprocessed signals, then a causal
-    second-order 10 Hz low-pass as on the robot. Trimmed like the fit."""
-    st = model.state(pre.q, pre.qd, pre.delta, pre.delta_dot)
-    f_b = model.disturbance(st, params, pre.qdd, pre.tau)
-    f_hat = signals.lowpass(f_b, pre.dt, cutoff_hz)
-    return f_hat[pre.trim: len(pre.t) - pre.trim]
+                         cutoff_hz: float = OBSERVER_CUTOFF_HZ,
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Times (M,) and F̂_b (M, 3) in the base frame: eq. 40 on the preprocessed signals, then a
+    causal second-order 10 Hz low-pass as on the robot. Evaluated every
+    :func:`observer_step` samples (torques averaged over the step), trimmed like the fit."""
+    step = observer_step(pre.dt, pre.grid.step, cutoff_hz)
+    n = len(pre.t)
+    idx = observer_samples(0, n - step // 2, step)
+    at = row_inputs(pre, idx, step)
+    st = model.state(at.q, at.qd, at.delta, at.delta_dot)
+    f_b = model.disturbance(st, params, at.qdd, at.tau)
+    f_hat = signals.lowpass(f_b, pre.dt * step, cutoff_hz)
+    keep = (idx >= pre.trim) & (idx < n - pre.trim)
+    return pre.t[idx[keep]], f_hat[keep]
 
 
 def validate_log(log: Log, platform: Platform, params: DynamicParameters,
@@ -60,8 +81,7 @@ def validate_log(log: Log, platform: Platform, params: DynamicParameters,
     pre = preprocess(log, platform, span, input_delay)
     m = params.vector(platform.unit_names, "per-wheel")
     tri = triangles(model, pre, "per-wheel")
-    f_hat = disturbance_estimate(model, pre, params)
-    t = pre.t[pre.trim: len(pre.t) - pre.trim]
+    t, f_hat = disturbance_estimate(model, pre, params)
     force = np.hypot(f_hat[:, 0], f_hat[:, 1])
     return LogValidation(
         source=log.source, samples=tri.samples, rms=tri.rms(m),
