@@ -6,8 +6,9 @@ import json
 
 import click
 
-from ropod_sysid.cli.common import platform_option, reports_errors
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
 from ropod_sysid.cli.fit import dask_option, workers_option
+from ropod_sysid.fit import fit_settings
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
@@ -26,9 +27,11 @@ from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object for scripts.")
 @workers_option
 @dask_option
+@quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: str | None,
-            as_json: bool, workers: int | None, dask_address: str | None) -> None:
+            as_json: bool, workers: int | None, dask_address: str | None,
+            quiet: bool) -> None:
     """Residual RMS per log and DOF, and the disturbance observer's view (eq. 40).
 
     Each log is read and processed in chunks; with --workers or --dask the logs are processed
@@ -36,11 +39,10 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: s
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     params = DynamicParameters.from_mapping(pfile.values(), platform.unit_names, params_path)
-    span_text = span if span is not None else pfile.extras.get("span")
-    sp = Span.parse(str(span_text).replace(" samples", "") if span_text is not None else None)
-    delay = float(pfile.extras.get("input_delay_s") or 0.0)
+    file_span, delay, row_step = fit_settings(pfile, params_path)  # as the fit was made
+    sp = Span.parse(span) if span is not None else file_span
     results = validate_sources(list(logs), platform, params, sp, delay, workers=workers,
-                               dask_address=dask_address)
+                               dask_address=dask_address, row_step=row_step, quiet=quiet)
     if as_json:
         click.echo(json.dumps({
             "params": params_path, "span": str(sp),

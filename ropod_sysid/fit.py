@@ -8,6 +8,7 @@ solved in the least-squares sense (eq. 38) — here by QR triangles (:mod:`ropod
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -115,6 +116,44 @@ class FitResult:
         return ParameterFile(self.platform.name, params,  # type: ignore[arg-type]
                              {"translation": rms["translation"], "rotation": rms["rotation"]},
                              sol.condition_number, sol.rank, self.samples, extras)
+
+
+def _span_of(pfile: ParameterFile, where: str) -> Span:
+    text = pfile.extras.get("span")
+    if text is None:
+        return Span.parse(None)
+    try:
+        return Span.parse(str(text).replace(" samples", "").strip())
+    except InputError:
+        raise InputError(f"{where}: key 'span' is {text!r}; expected e.g. '0.1s' or "
+                         "'21 samples', or give --span") from None
+
+
+def _row_step_of(pfile: ParameterFile, where: str) -> int | None:
+    step = pfile.extras.get("row_step")
+    if step is None or step == "auto":
+        return None
+    if isinstance(step, bool) or not isinstance(step, int) or step < 1:
+        raise InputError(f"{where}: key 'row_step' must be 'auto' or a positive whole number "
+                         f"of samples, got {step!r}")
+    return step
+
+
+def _delay_of(pfile: ParameterFile, where: str) -> float:
+    d = pfile.extras.get("input_delay_s")
+    if d is None:
+        return 0.0
+    if isinstance(d, bool) or not isinstance(d, int | float) or not math.isfinite(d) or d < 0:
+        raise InputError(f"{where}: key 'input_delay_s' must be a non-negative number of "
+                         f"seconds, got {d!r}")
+    return float(d)
+
+
+def fit_settings(pfile: ParameterFile, where: str) -> tuple[Span, float, int | None]:
+    """The preprocessing a parameter file was fitted with: (span, input delay [s], row step or
+    None for auto), from its extras; files without them get the defaults. A bad value is a
+    one-line :class:`InputError` naming ``where``."""
+    return _span_of(pfile, where), _delay_of(pfile, where), _row_step_of(pfile, where)
 
 
 def physical_bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:

@@ -682,11 +682,12 @@ def log_triangles(source: Source, platform: Platform, span: Span | None = None,
 
 def validate_source(source: Source, platform: Platform, params: DynamicParameters,
                     span: Span | None = None, input_delay: float = 0.0,
-                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False) -> LogValidation:
+                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
+                    row_step: int | None = None) -> LogValidation:
     """:func:`ropod_sysid.validate.validate_log` of a log read in chunks. The observer series
     (``t``, ``f_hat``) are kept only with ``keep_series`` (they grow with the log)."""
     res = stream_log(source, platform, span, input_delay, "per-wheel", chunk, params,
-                     keep_series)
+                     keep_series, row_step=row_step)
     obs = res.observer
     assert obs is not None
     m = params.vector(platform.unit_names, "per-wheel")
@@ -728,12 +729,14 @@ def check_source(source: Source, platform: Platform) -> None:
 def validate_sources(sources: list[Source], platform: Platform, params: DynamicParameters,
                      span: Span | None = None, input_delay: float = 0.0,
                      chunk: int = DEFAULT_CHUNK, workers: int | None = None,
-                     dask_address: str | None = None) -> list[LogValidation]:
-    """:func:`validate_source` for each log, on Dask with ``workers`` or ``dask_address``."""
+                     dask_address: str | None = None, row_step: int | None = None,
+                     quiet: bool = True) -> list[LogValidation]:
+    """:func:`validate_source` for each log, on Dask with ``workers`` or ``dask_address``
+    (a progress bar over the logs unless ``quiet``)."""
     from ropod_sysid.distributed import pool
 
     for src in sources:
         check_source(src, platform)
-    with pool(workers, dask_address) as run:
+    with pool(workers, dask_address, quiet=quiet) as run:
         return run(validate_source, sources, platform=platform, params=params, span=span,
-                   input_delay=input_delay, chunk=chunk)
+                   input_delay=input_delay, chunk=chunk, row_step=row_step)

@@ -75,10 +75,12 @@ def disturbance_estimate(model: PlatformModel, pre: Preprocessed, params: Dynami
 
 
 def validate_log(log: Log, platform: Platform, params: DynamicParameters,
-                 span: Span | None = None, input_delay: float = 0.0) -> LogValidation:
-    """Residual and observer figures of one log for given parameters."""
+                 span: Span | None = None, input_delay: float = 0.0,
+                 row_step: int | None = None) -> LogValidation:
+    """Residual and observer figures of one log for given parameters (``span``,
+    ``input_delay`` and ``row_step`` as the fit's)."""
     model = PlatformModel(platform)
-    pre = preprocess(log, platform, span, input_delay)
+    pre = preprocess(log, platform, span, input_delay, row_step)
     m = params.vector(platform.unit_names, "per-wheel")
     tri = triangles(model, pre, "per-wheel")
     t, f_hat = disturbance_estimate(model, pre, params)
@@ -95,6 +97,7 @@ def validate_log(log: Log, platform: Platform, params: DynamicParameters,
 
 
 def validate_logs(logs: Sequence[Log], platform: Platform, params: DynamicParameters,
-                  span: Span | None = None, input_delay: float = 0.0) -> list[LogValidation]:
+                  span: Span | None = None, input_delay: float = 0.0,
+                  row_step: int | None = None) -> list[LogValidation]:
     """:func:`validate_log` for each log."""
-    return [validate_log(log, platform, params, span, input_delay) for log in logs]
+    return [validate_log(log, platform, params, span, input_delay, row_step) for log in logs]

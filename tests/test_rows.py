@@ -144,6 +144,19 @@ def test_cli_row_step(tmp_path, off_square, runs_off_square):
     assert bad.exit_code == 2
     assert bad.output.strip() == ("error: --row-step 'two': use auto or a positive whole number "
                                   "of samples (1 = every sample)")
+    # validate takes the fit's row step from the file, and says so when it is bad
+    v = CliRunner().invoke(main, ["validate", logs[0], "--platform",
+                                  str(tmp_path / "platform.yaml"), "--params", str(out),
+                                  "--json", "--quiet"])
+    assert v.exit_code == 0, v.output
+    assert json.loads(v.output)["logs"][0]["samples"] == data["logs"][0]["samples"]
+    data["row_step"] = "x"
+    out.write_text(json.dumps(data))
+    v = CliRunner().invoke(main, ["validate", logs[0], "--platform",
+                                  str(tmp_path / "platform.yaml"), "--params", str(out)])
+    assert v.exit_code == 2
+    assert v.output.strip() == (f"error: {out}: key 'row_step' must be 'auto' or a positive "
+                                "whole number of samples, got 'x'")
 
 
 def test_std_accounts_for_the_rows_loess():

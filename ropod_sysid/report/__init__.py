@@ -29,7 +29,14 @@ import numpy as np
 
 from ropod_sysid import __version__
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, FitResult, LogFit, fit_systems, mean_correlation
+from ropod_sysid.fit import (
+    FitOptions,
+    FitResult,
+    LogFit,
+    fit_settings,
+    fit_systems,
+    mean_correlation,
+)
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
@@ -101,9 +108,8 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     if pfile.platform != platform.name:
         notes.append(f"the parameter file is for platform '{pfile.platform}', the platform "
                      f"file describes '{platform.name}'")
-    span = span if span is not None else _span_of(pfile, where)
-    delay = _delay_of(pfile, where)
-    row_step = _row_step_of(pfile, where)
+    file_span, delay, row_step = fit_settings(pfile, where)
+    span = span if span is not None else file_span
     fixed = {k: values[k] for k in names
              if k in values and pfile.parameters[k].get("fixed") is True}
     extra_fixed = pfile.extras.get("fixed")
@@ -158,37 +164,6 @@ def _friction_of(pfile: ParameterFile, values: dict[str, float], where: str) -> 
     if declared is not None:
         raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
     return "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel"
-
-
-def _span_of(pfile: ParameterFile, where: str) -> Span:
-    text = pfile.extras.get("span")
-    if text is None:
-        return Span.parse(None)
-    try:
-        return Span.parse(str(text).replace(" samples", "").strip())
-    except InputError:
-        raise InputError(f"{where}: key 'span' is {text!r}; expected e.g. '0.1s' or "
-                         "'21 samples', or give --span") from None
-
-
-def _row_step_of(pfile: ParameterFile, where: str) -> int | None:
-    step = pfile.extras.get("row_step")
-    if step is None or step == "auto":
-        return None
-    if isinstance(step, bool) or not isinstance(step, int) or step < 1:
-        raise InputError(f"{where}: key 'row_step' must be 'auto' or a positive whole number "
-                         f"of samples, got {step!r}")
-    return step
-
-
-def _delay_of(pfile: ParameterFile, where: str) -> float:
-    d = pfile.extras.get("input_delay_s")
-    if d is None:
-        return 0.0
-    if isinstance(d, bool) or not isinstance(d, int | float) or not math.isfinite(d) or d < 0:
-        raise InputError(f"{where}: key 'input_delay_s' must be a non-negative number of "
-                         f"seconds, got {d!r}")
-    return float(d)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -385,7 +360,8 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
         params = DynamicParameters.from_vector(shown, platform.unit_names,
                                                result.options.friction)
         for k, v in enumerate(validate_logs(validation_logs, platform, params,
-                                            result.options.span, result.input_delay)):
+                                            result.options.span, result.input_delay,
+                                            result.options.row_step)):
             validation.append({
                 "id": f"validation-{k + 1}", "source": v.source, "name": _short(v.source),
                 "samples": v.samples,
