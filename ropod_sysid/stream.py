@@ -1,10 +1,10 @@
 """Chunked identification: a log of any length in bounded memory, equal to the in-memory path.
 
 A log is read in chunks (:func:`ropod_sysid.io.csvlog.iter_csv_log` for CSV, also ``.csv.gz``;
-MCAP logs and the robot's smart-wheel CSV layout are read whole by their own readers, which
-have no chunked iteration yet, and then processed in chunks) and goes through the steps of
-:func:`ropod_sysid.regressor.preprocess` and :func:`ropod_sysid.regressor.triangles` block by
-block:
+:func:`ropod_sysid.io.mcaplog.iter_mcap_log` for MCAP; the robot's smart-wheel layout, whose
+frames are checked over the whole log, is read whole and then processed in chunks) and goes
+through the steps of :func:`ropod_sysid.regressor.preprocess` and
+:func:`ropod_sysid.regressor.triangles` block by block:
 
 1. pivot angles (and a tracker heading) unwrapped, continued across chunks;
 2. the sample time from the head of the log (:func:`ropod_sysid.regressor.grid_step`); a log
@@ -629,11 +629,8 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
         chunks = iter_chunks(source, platform, chunk)
         if prefetch and not isinstance(source, Log):
             chunks = _prefetch(chunks)
-        seen = False
         for log in chunks:
-            if not seen:
-                notes.extend(log.notes)
-                seen = True
+            notes.extend(n for n in log.notes if n not in notes)  # (an MCAP's damage: last)
             grid.push(log)
         notes += grid.finish()
         tri, obs, n = blocks.finish()

@@ -328,3 +328,84 @@ def test_wrong_platform_unknown_topic_and_nan_are_one_line_errors(tmp_path, mcap
     write_mcap_log(unsorted, path, "ros2")
     with pytest.raises(InputError, match="message 2: time .* is not after"):
         read_mcap_log(path, off_square)
+
+
+# ---------------------------------------------------------------------------------------------
+# chunked reading
+
+
+def read_chunked(path, platform, chunk):
+    """iter_mcap_log's chunks joined: ('ok', log, warning texts, chunk lengths) or
+    ('error', message)."""
+    from ropod_sysid.io.log import Log
+    from ropod_sysid.io.mcaplog import iter_mcap_log
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            parts = list(iter_mcap_log(path, platform, chunk))
+        except InputError as exc:
+            assert "\n" not in str(exc)
+            return ("error", str(exc))
+    cat = {name: np.concatenate([getattr(p, name) for p in parts])
+           for name in ("t", "delta", "phi", "current")}
+    pose = None if parts[0].pose is None else np.concatenate([p.pose for p in parts])
+    notes = [n for p in parts for n in p.notes]
+    log = Log(cat["t"], parts[0].units, cat["delta"], cat["phi"], cat["current"], pose,
+              str(path), notes)
+    return ("ok", log, [str(w.message) for w in caught], [p.n_samples for p in parts])
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+@pytest.mark.parametrize("chunk", [97, 1600, 5000])
+def test_chunked_read_is_the_whole_read(mcap_files, off_square, encoding, chunk):
+    whole = read_quiet(mcap_files[encoding], off_square)
+    ok, log, texts, sizes = read_chunked(mcap_files[encoding], off_square, chunk)
+    assert ok == "ok" and texts == [] and log.notes == []
+    assert_same_log(log, whole)
+    assert max(sizes) <= chunk and sum(sizes) == whole.n_samples == 1601
+    assert len(sizes) == -(-1601 // chunk)
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_chunked_read_of_damaged_files_recovers_the_same(tmp_path, mcap_files, off_square,
+                                                         encoding):
+    """Cut anywhere: the chunks hold exactly the messages the whole read recovers, with the
+    same note (on the last chunk) and warning, or fail with the same one-line error."""
+    data = mcap_files[encoding].read_bytes()
+    path = tmp_path / "cut.mcap"
+    for cut in [5, 200] + [int(f * len(data)) for f in np.linspace(0.05, 0.95, 10)] \
+            + [len(data) - 9]:
+        path.write_bytes(data[:cut])
+        whole = read_damaged(path, off_square)
+        chunked = read_chunked(path, off_square, 300)
+        if whole[0] == "error":
+            assert chunked == whole, cut
+            continue
+        _, n, texts = whole
+        ok, log, ctexts, sizes = chunked
+        assert ok == "ok" and log.n_samples == n and ctexts == texts == log.notes, cut
+        assert_same_log(log, read_log_quietly(path, off_square))
+
+
+def read_log_quietly(path, platform):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return read_mcap_log(path, platform)
+
+
+def test_time_going_back_across_a_chunk_names_the_message(tmp_path, off_square,
+                                                          runs_off_square):
+    from ropod_sysid.io.mcaplog import iter_mcap_log
+
+    log = runs_off_square[0].log.slice(0, 400)
+    log = dataclasses.replace(log, t=log.t.copy())  # (a slice shares the fixture's arrays)
+    log.t[300] = log.t[299]  # message 300 of the file, the first of the fourth chunk of 100
+    path = tmp_path / "back.mcap"
+    write_mcap_log(log, path, "json")
+    with pytest.raises(InputError) as e:
+        list(iter_mcap_log(path, off_square, 100))
+    with pytest.raises(InputError) as whole:
+        read_mcap_log(path, off_square)
+    assert str(e.value) == str(whole.value)
+    assert "message 300: time" in str(e.value) and "of message 299" in str(e.value)

@@ -33,6 +33,7 @@ import os
 import struct
 import warnings
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -214,6 +215,7 @@ class McapScan:
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
     messages: dict[int, list[Message]] = field(default_factory=dict)   # channel id → messages
+    counts: dict[int, int] = field(default_factory=dict)   # channel id → number of messages
     damage: str | None = None          # what stopped reading, None for an intact file
     complete: bool = False             # the whole data section was read (damage, if any, is
                                        # in the summary, the footer or outside the chunks)
@@ -221,7 +223,7 @@ class McapScan:
 
     @property
     def n_messages(self) -> int:
-        return sum(len(m) for m in self.messages.values())
+        return sum(self.counts.values())
 
 
 class _Bounded:
@@ -249,15 +251,25 @@ def _open_binary(path: Path, where: str) -> IO[bytes]:
         raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") from None
 
 
-def scan_mcap(path: str | Path) -> McapScan:
-    """All schemas, channels and messages of an MCAP file in file order, up to any damage.
+def scan_mcap(path: str | Path, keep_messages: bool = True) -> McapScan:
+    """All schemas, channels and messages of an MCAP file in file order, up to any damage
+    (without ``keep_messages`` the messages are only counted, :attr:`McapScan.counts`).
 
     Raises :class:`InputError` only when the file is not MCAP at all (missing, empty, wrong
     magic, unreadable first record); damage further on is reported in :attr:`McapScan.damage`.
     """
+    scan = McapScan()
+    for record in _records(path, scan):
+        _take(scan, record, keep_messages)
+    return scan
+
+
+def _records(path: str | Path, scan: McapScan) -> Iterator[Any]:
+    """The records of an MCAP file in file order (chunks broken up), up to the first damage,
+    which is noted in ``scan`` (with :attr:`McapScan.complete` and the size) as
+    :func:`scan_mcap` describes."""
     where = str(path)
     path = Path(path)
-    scan = McapScan()
     with _open_binary(path, where) as f:
         try:
             scan.size = os.fstat(f.fileno()).st_size
@@ -298,7 +310,7 @@ def scan_mcap(path: str | Path) -> McapScan:
                 break
             first = False
             for r in inner:
-                _take(scan, r)
+                yield r
                 if isinstance(r, DataEnd):
                     scan.complete = True
                 elif isinstance(r, Footer):
@@ -306,7 +318,6 @@ def scan_mcap(path: str | Path) -> McapScan:
                     if not _summary_crc_ok(f, r, good_end):
                         scan.damage = "CRC mismatch of the summary section"
             good_end = src.pos
-    return scan
 
 
 def _summary_crc_ok(f: IO[bytes], footer: Footer, footer_start: int) -> bool:
@@ -333,14 +344,17 @@ def _chunk_records(chunk: Chunk) -> list[Any]:
     return breakup_chunk(chunk, validate_crc=True)
 
 
-def _take(scan: McapScan, record: Any) -> None:
+def _take(scan: McapScan, record: Any, keep_messages: bool = True) -> None:
     # the first copy counts: the summary repeats schemas and channels, and is read last
     if isinstance(record, Schema):
         scan.schemas.setdefault(record.id, record)
     elif isinstance(record, Channel):
         scan.channels.setdefault(record.id, record)
     elif isinstance(record, Message):
-        scan.messages.setdefault(record.channel_id, []).append(record)
+        cid = record.channel_id
+        scan.counts[cid] = scan.counts.get(cid, 0) + 1
+        if keep_messages:
+            scan.messages.setdefault(cid, []).append(record)
 
 
 def _what(exc: BaseException, good_end: int, at_eof: bool, boundary: bool) -> str:
@@ -413,7 +427,7 @@ def pick_stream(scan: McapScan, where: str) -> Stream:
         raise InputError(
             f"{where}: no ropod-sysid log or smart-wheel data in this MCAP file (channels: "
             f"{listed}); expected topic {CONTRACT_TOPIC} or /sw_ethercat_parser/data")
-    found.sort(key=lambda s: (s.layout != "contract", -len(s.messages)))
+    found.sort(key=lambda s: (s.layout != "contract", -scan.counts.get(s.channel.id, 0)))
     return found[0]
 
 
@@ -441,11 +455,97 @@ def read_mcap_log(path: str | Path, platform: Platform) -> Log:
         try:
             decoded.append(decode(msg.data))
         except READ_ERRORS as exc:
-            what = " ".join(str(exc).split())[:60]
-            damage = (f"message {k} on {stream.channel.topic} cannot be decoded "
-                      f"({type(exc).__name__}{': ' + what if what else ''})")
+            damage = _undecodable(k, stream, exc)
             break
     n = len(decoded)
+    _check_recovered(n, damage, stream, where)
+    if stream.layout == "smartwheel":
+        from ropod_sysid.io.smartwheel import frames_from_messages, frames_to_log
+
+        frames = frames_from_messages(decoded, platform, where, stream.encoding)
+        log = frames_to_log(frames, platform, where, warn=False)
+    else:
+        log = _contract_log(decoded, stream.encoding, platform, where, damage is not None)
+    if damage:
+        log.notes.insert(0, _damage_note(n, len(stream.messages), damage, scan, where))
+    for note in log.notes:
+        warnings.warn(note, stacklevel=2)
+    return log
+
+
+def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> Iterator[Log]:
+    """:func:`read_mcap_log` as consecutive logs of ``chunk`` messages, in memory bounded by
+    the chunk: a first pass over the records finds the channels, counts the messages and
+    notes any damage (nothing is kept), a second decodes the chosen channel's messages as
+    they come. The same checks and messages as the whole read, numbered in the whole file;
+    the damage note (and its warning) comes with the last chunk. The smart-wheel layout,
+    whose frames are checked over the whole log, is read whole and then cut.
+    """
+    if chunk < 1:
+        raise ValueError(f"chunk must be positive, got {chunk}")
+    where = str(path)
+    scan = scan_mcap(path, keep_messages=False)
+    stream = pick_stream(scan, where)
+    if stream.layout != "contract":
+        log = read_mcap_log(path, platform)
+        for start in range(0, log.n_samples, chunk):
+            yield log.slice(start, start + chunk)
+        return
+    decode = _decoder(stream, where)
+    cid = stream.channel.id
+    damage = scan.damage
+    buf: list[Any] = []
+    done = 0  # messages yielded
+    t_last: float | None = None
+
+    def emit(msgs: list[Any], final: bool) -> Log:
+        nonlocal done, t_last
+        log = _contract_log(msgs, stream.encoding, platform, where, damage is not None,
+                            offset=done, whole=False)
+        if t_last is not None and not log.t[0] > t_last:
+            raise InputError(f"{where}: message {done}: time t={float(log.t[0])!r} is not "
+                             f"after t={t_last!r} of message {done - 1}; time must strictly "
+                             "increase")
+        done += len(msgs)
+        t_last = float(log.t[-1])
+        if final and damage:
+            log.notes.insert(0, _damage_note(done, scan.counts.get(cid, 0), damage, scan,
+                                             where))
+        return log
+
+    records = _records(path, McapScan())
+    try:
+        k = 0
+        for record in records:
+            if not (isinstance(record, Message) and record.channel_id == cid):
+                continue
+            try:
+                buf.append(decode(record.data))
+            except READ_ERRORS as exc:
+                damage = _undecodable(k, stream, exc)
+                break
+            k += 1
+            if len(buf) > chunk:  # one held back: the last chunk is never empty
+                yield emit(buf[:chunk], False)
+                del buf[:chunk]
+    finally:
+        records.close()
+    if done == 0:
+        _check_recovered(len(buf), damage, stream, where)
+    last = emit(buf, True)
+    for note in last.notes:
+        warnings.warn(note, stacklevel=2)
+    yield last
+
+
+def _undecodable(k: int, stream: Stream, exc: BaseException) -> str:
+    what = " ".join(str(exc).split())[:60]
+    return (f"message {k} on {stream.channel.topic} cannot be decoded "
+            f"({type(exc).__name__}{': ' + what if what else ''})")
+
+
+def _check_recovered(n: int, damage: str | None, stream: Stream, where: str) -> None:
+    """The one-line errors of a log with no messages, or too few before damage."""
     if n == 0:
         if damage:
             raise InputError(f"{where}: damaged MCAP file ({damage}); no messages could be "
@@ -455,25 +555,15 @@ def read_mcap_log(path: str | Path, platform: Platform) -> Log:
         raise InputError(f"{where}: damaged MCAP file ({damage}); only {n} message"
                          f"{'s' if n != 1 else ''} could be recovered, at least {MIN_SAMPLES} "
                          "samples are needed")
-    if stream.layout == "smartwheel":
-        from ropod_sysid.io.smartwheel import frames_from_messages, frames_to_log
 
-        frames = frames_from_messages(decoded, platform, where, stream.encoding)
-        log = frames_to_log(frames, platform, where, warn=False)
-    else:
-        log = _contract_log(decoded, stream.encoding, platform, where, damage is not None)
-    if damage:
-        total = f" of {len(stream.messages)}" if len(stream.messages) > n else ""
-        if scan.complete and damage is scan.damage:
-            note = (f"{where}: damaged MCAP file ({damage}); all {n} messages were recovered "
-                    "(the damage is not in them)")
-        else:
-            note = (f"{where}: damaged MCAP file ({damage}); recovered the {n}{total} message"
-                    f"{'s' if n != 1 else ''} before the damage — the log may end early")
-        log.notes.insert(0, note)
-    for note in log.notes:
-        warnings.warn(note, stacklevel=2)
-    return log
+
+def _damage_note(n: int, total: int, damage: str, scan: McapScan, where: str) -> str:
+    if scan.complete and damage is scan.damage:
+        return (f"{where}: damaged MCAP file ({damage}); all {n} messages were recovered "
+                "(the damage is not in them)")
+    of = f" of {total}" if total > n else ""
+    return (f"{where}: damaged MCAP file ({damage}); recovered the {n}{of} message"
+            f"{'s' if n != 1 else ''} before the damage — the log may end early")
 
 
 def _decoder(stream: Stream, where: str) -> Any:
@@ -496,7 +586,10 @@ def _decoder(stream: Stream, where: str) -> Any:
 
 
 def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: str,
-                  damaged: bool) -> Log:
+                  damaged: bool, offset: int = 0, whole: bool = True) -> Log:
+    """The log of decoded contract messages; ``offset``: the number of the first message in
+    the file (for the messages' numbers in errors); ``whole``: the messages are the whole log
+    (else a chunk of it: too few of them is no error)."""
     units = platform.unit_names
     n_units = len(units)
     n = len(decoded)
@@ -506,8 +599,8 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
     if encoding == "json":
         first = decoded[0]
         if not isinstance(first, dict) or not isinstance(first.get("units"), dict):
-            raise InputError(f"{where}: message 0 is not a ropod-sysid log sample (expected "
-                             "keys 't' and 'units'); the file may use another layout")
+            raise InputError(f"{where}: message {offset} is not a ropod-sysid log sample "
+                             "(expected keys 't' and 'units'); the file may use another layout")
         _check_units(list(first["units"]), platform, where)
         has_pose = isinstance(first.get("pose"), dict)
         if has_pose:
@@ -523,9 +616,9 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
                     p = m["pose"]
                     pose[k] = (p["x_b"], p["y_b"], p["theta_b"])
             except (KeyError, TypeError, ValueError) as exc:
-                raise InputError(f"{where}: message {k} lacks a log field ({_field(exc)}); "
-                                 "every message needs t and delta, phi_L, phi_R, cur_L, cur_R "
-                                 "of every unit") from None
+                raise InputError(f"{where}: message {offset + k} lacks a log field "
+                                 f"({_field(exc)}); every message needs t and delta, phi_L, "
+                                 "phi_R, cur_L, cur_R of every unit") from None
     else:
         first_units = list(decoded[0].units)
         _check_units(first_units, platform, where)
@@ -535,9 +628,9 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
             pose = np.empty((n, 3))
         for k, m in enumerate(decoded):
             if list(m.units) != first_units:
-                raise InputError(f"{where}: message {k} lists units {list(m.units)} but "
-                                 f"message 0 lists {first_units}; the unit order must not "
-                                 "change within a log")
+                raise InputError(f"{where}: message {offset + k} lists units {list(m.units)} "
+                                 f"but message {offset} lists {first_units}; the unit order "
+                                 "must not change within a log")
             t[k] = m.t
             try:
                 for j, arr in enumerate((m.delta, m.phi_l, m.phi_r, m.cur_l, m.cur_r)):
@@ -545,24 +638,26 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
                 if pose is not None:
                     pose[k] = m.pose
             except (IndexError, ValueError) as exc:
-                raise InputError(f"{where}: message {k} has arrays shorter than its unit list "
-                                 f"({type(exc).__name__}); the message is malformed") from None
+                raise InputError(f"{where}: message {offset + k} has arrays shorter than its "
+                                 f"unit list ({type(exc).__name__}); the message is malformed") \
+                    from None
     bad = ~np.isfinite(vals).all(axis=(1, 2)) | ~np.isfinite(t)
     if pose is not None:
         bad |= ~np.isfinite(pose).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise InputError(f"{where}: message {k} has a NaN or infinite value; the log must be "
-                         "finite — repair or cut the recording")
-    if n < MIN_SAMPLES:
+        raise InputError(f"{where}: message {offset + k} has a NaN or infinite value; the log "
+                         "must be finite — repair or cut the recording")
+    if whole and n < MIN_SAMPLES:
         raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
                          f"{MIN_SAMPLES} samples are needed — use a longer log")
     steps = np.diff(t)
     nonincr = np.flatnonzero(~(steps > 0))
     if nonincr.size:
         k = int(nonincr[0])
-        raise InputError(f"{where}: message {k + 1}: time t={float(t[k + 1])!r} is not after "
-                         f"t={float(t[k])!r} of message {k}; time must strictly increase")
+        raise InputError(f"{where}: message {offset + k + 1}: time t={float(t[k + 1])!r} is "
+                         f"not after t={float(t[k])!r} of message {offset + k}; time must "
+                         "strictly increase")
     return Log(t=t, units=list(units), delta=np.ascontiguousarray(vals[:, :, 0]),
                phi=np.ascontiguousarray(vals[:, :, 1:3]),
                current=np.ascontiguousarray(vals[:, :, 3:5]), pose=pose, source=where)
@@ -584,6 +679,6 @@ def _check_units(log_units: list[str], platform: Platform, where: str) -> None:
 
 
 __all__ = [
-    "CONTRACT_MSGDEF", "CONTRACT_TOPIC", "ENCODINGS", "McapScan", "read_mcap_log", "scan_mcap",
-    "write_mcap_log",
+    "CONTRACT_MSGDEF", "CONTRACT_TOPIC", "ENCODINGS", "McapScan", "iter_mcap_log",
+    "read_mcap_log", "scan_mcap", "write_mcap_log",
 ]
