@@ -128,13 +128,9 @@ def _iter_path(path: Path, platform: Platform, chunk: int) -> Iterator[Log]:
         yield from iter_csv_log(path, platform, chunk)
         return
     if name.endswith(".mcap"):
-        from ropod_sysid.io import mcaplog
+        from ropod_sysid.io.mcaplog import iter_mcap_log
 
-        iterate = getattr(mcaplog, "iter_mcap_log", None)
-        if iterate is not None:
-            yield from iterate(path, platform, chunk)
-        else:  # the MCAP reader has no chunked iteration: read it whole, process it in chunks
-            yield from _iter_log(mcaplog.read_mcap_log(path, platform), chunk)
+        yield from iter_mcap_log(path, platform, chunk)
         return
     suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
     raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
