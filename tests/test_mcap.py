@@ -409,3 +409,17 @@ def test_time_going_back_across_a_chunk_names_the_message(tmp_path, off_square,
         read_mcap_log(path, off_square)
     assert str(e.value) == str(whole.value)
     assert "message 300: time" in str(e.value) and "of message 299" in str(e.value)
+
+
+def test_chunked_read_of_a_too_short_log_has_the_whole_read_error(tmp_path, off_square,
+                                                                  runs_off_square):
+    from ropod_sysid.io.mcaplog import iter_mcap_log
+
+    path = tmp_path / "two.mcap"
+    write_mcap_log(runs_off_square[0].log.slice(0, 2), path, "json")
+    with pytest.raises(InputError) as whole:
+        read_mcap_log(path, off_square)
+    with pytest.raises(InputError) as chunked:
+        list(iter_mcap_log(path, off_square, 100))
+    assert str(chunked.value) == str(whole.value)
+    assert "only 2 messages; at least 3 samples are needed" in str(whole.value)

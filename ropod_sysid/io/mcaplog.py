@@ -501,7 +501,7 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> 
     def emit(msgs: list[Any], final: bool) -> Log:
         nonlocal done, t_last
         log = _contract_log(msgs, stream.encoding, platform, where, damage is not None,
-                            offset=done, whole=False)
+                            offset=done, whole=final and done == 0)
         if t_last is not None and not log.t[0] > t_last:
             raise InputError(f"{where}: message {done}: time t={float(log.t[0])!r} is not "
                              f"after t={t_last!r} of message {done - 1}; time must strictly "
