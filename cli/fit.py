@@ -7,10 +7,12 @@ import click
 from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files
-from ropod_sysid.io import read_log
+from ropod_sysid.io import read_logs
+from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import write_parameter_file
-from ropod_sysid.platform import load_platform
-from ropod_sysid.regressor import Span
+from ropod_sysid.io.timebase import GAP_RULE
+from ropod_sysid.platform import Platform, load_platform
+from ropod_sysid.regressor import Span, usable_pieces
 from ropod_sysid.solve import RCOND
 from ropod_sysid.summary import format_fit
 
@@ -18,6 +20,12 @@ workers_option = click.option(
     "--workers", type=int, default=None, metavar="N",
     help="Reduce the logs in parallel on a local Dask cluster of N worker processes "
          "(needs: pip install 'ropod-sysid[dask]').")
+split_gaps_option = click.option(
+    "--split-gaps", is_flag=True,
+    help=f"A log with gaps in time ({GAP_RULE}) is refused; with this flag its pieces between "
+         "the gaps are fitted as separate logs, each with its own smoother ends (pieces too "
+         "short for the span are left out with a note). Pieces are named run.csv[1], "
+         "run.csv[2], … in the output.")
 dask_option = click.option(
     "--dask", "dask_address", default=None, metavar="ADDRESS",
     help="Reduce the logs on the workers of a running Dask scheduler, e.g. tcp://host:8786.")
@@ -76,12 +84,19 @@ def parse_row_step(text: str) -> int | None:
 
 def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_rotation: str,
                 physical: bool, input_delay: str, rcond: float,
-                row_step: str = "auto") -> FitOptions:
+                row_step: str = "auto", split_gaps: bool = False) -> FitOptions:
     return FitOptions(friction=friction,  # type: ignore[arg-type]
                       span=Span.parse(span), fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
                       physical=physical, input_delay=parse_delay(input_delay),  # type: ignore
-                      rcond=rcond, row_step=parse_row_step(row_step))
+                      rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps)
+
+
+def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span: Span | None,
+              row_step: int | None) -> list[Log]:
+    """Logs read whole for a report: with --split-gaps their pieces long enough to fit."""
+    logs = read_logs(paths, platform, split_gaps)
+    return usable_pieces(logs, span, row_step)[0] if split_gaps else logs
 
 
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
@@ -114,6 +129,7 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
               help="With --report: a parameter file shown side by side.")
 @click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
               help="With --report: validation log (repeatable).")
+@split_gaps_option
 @workers_option
 @dask_option
 @quiet_option
@@ -122,8 +138,8 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
             span: str | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
-            validate_logs: tuple[str, ...], workers: int | None, dask_address: str | None,
-            quiet: bool) -> None:
+            validate_logs: tuple[str, ...], split_gaps: bool, workers: int | None,
+            dask_address: str | None, quiet: bool) -> None:
     """Fit the dynamic parameters to LOGS (stacked) and write the parameter file.
 
     Each log is read and reduced in chunks, so its length is not limited by memory; with
@@ -131,7 +147,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     """
     platform = load_platform(platform_path)
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                          row_step)
+                          row_step, split_gaps)
 
     def say(msg: str) -> None:
         if not quiet:
@@ -142,13 +158,14 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     loaded = None
     if report_path is not None:
         # the report plots every sample: it needs the logs in memory
-        loaded = [read_log(p, platform) for p in logs]
+        loaded = pieces_of(logs, platform, split_gaps, options.span, options.row_step)
     write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
     if report_path is not None:
         from ropod_sysid.report import write_fit_report
 
         write_fit_report(result, loaded, report_path, compare=compare_path,
-                         validation_logs=[read_log(p, platform) for p in validate_logs])
+                         validation_logs=pieces_of(validate_logs, platform, split_gaps,
+                                                   options.span, options.row_step))
         say(f"wrote {report_path}")
     if not quiet:
         click.echo(format_fit(result))

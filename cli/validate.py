@@ -7,7 +7,7 @@ import json
 import click
 
 from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
-from ropod_sysid.cli.fit import dask_option, workers_option
+from ropod_sysid.cli.fit import dask_option, split_gaps_option, workers_option
 from ropod_sysid.fit import fit_settings
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.params import DynamicParameters
@@ -25,12 +25,13 @@ from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
               help="Parameter file of a fit.")
 @click.option("--span", default=None, help="LOESS span: samples or seconds (default: the fit's).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object for scripts.")
+@split_gaps_option
 @workers_option
 @dask_option
 @quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: str | None,
-            as_json: bool, workers: int | None, dask_address: str | None,
+            as_json: bool, split_gaps: bool, workers: int | None, dask_address: str | None,
             quiet: bool) -> None:
     """Residual RMS per log and DOF, and the disturbance observer's view (eq. 40).
 
@@ -42,7 +43,8 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: s
     file_span, delay, row_step = fit_settings(pfile, params_path)  # as the fit was made
     sp = Span.parse(span) if span is not None else file_span
     results = validate_sources(list(logs), platform, params, sp, delay, workers=workers,
-                               dask_address=dask_address, row_step=row_step, quiet=quiet)
+                               dask_address=dask_address, row_step=row_step, quiet=quiet,
+                               split_gaps=split_gaps)
     if as_json:
         click.echo(json.dumps({
             "params": params_path, "span": str(sp),

@@ -17,12 +17,14 @@ from typing import Literal
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
+from ropod_sysid.io.timebase import split_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Friction, kind_of
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, preprocess, triangles
+from ropod_sysid.regressor import Span, preprocess, triangles, usable_pieces
 from ropod_sysid.solve import RCOND, Solution, Triangles, combined_rms, solve, stack_triangles
 
 WeightRotation = Literal["auto", "none"] | float
@@ -41,6 +43,7 @@ class FitOptions:
     rcond: float = RCOND
     max_delay: float = 0.05
     row_step: int | None = None  # samples between equation rows; None: ~10 per span
+    split_gaps: bool = False  # fit the pieces between gaps in time as separate logs
 
 
 @dataclass
@@ -102,6 +105,7 @@ class FitResult:
             "row_step": self.options.row_step or "auto",
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
+            **({"split_gaps": True} if self.options.split_gaps else {}),
             "logs": [{"file": lf.source, "samples": lf.samples, "rows": lf.triangles.rows,
                       "rms": {"translation": lf.rms["translation"],
                               "rotation": lf.rms["rotation"]}} for lf in self.logs],
@@ -202,13 +206,19 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
     """Fit the dynamic parameters to several in-memory logs stacked together (eqs. 36–38).
 
     Each log is preprocessed whole (:func:`ropod_sysid.regressor.preprocess`); for log files of
-    any length use :func:`fit_files`, which streams them.
+    any length use :func:`fit_files`, which streams them. With ``options.split_gaps`` a log
+    with gaps in time is fitted as its pieces (:func:`ropod_sysid.io.timebase.split_log`; those
+    too short for the span are left out with a note on the first log).
     """
     options = options or FitOptions()
     if not logs:
         raise InputError("no logs given; pass one or more log files")
     model = PlatformModel(platform)
     say = progress or (lambda _msg: None)
+    left: list[str] = []
+    if options.split_gaps:
+        logs, left = usable_pieces([p for log in logs for p in split_log(log)], options.span,
+                                   options.row_step)
 
     def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
         out = []
@@ -216,6 +226,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
             out.append((log.source, triangles(model, pre, options.friction), pre.notes))
+        out[0][2].extend(left)
         return out
 
     return _fit(reduce, platform, options)
@@ -232,15 +243,18 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     result equals :func:`fit_logs` of the whole logs to rounding. With ``workers`` (a local
     Dask cluster of that many processes) or ``dask_address`` (an existing scheduler) each log
     is reduced on a worker and only the triangles come back. ``input_delay="auto"`` streams the
-    logs again for every delay it tries.
+    logs again for every delay it tries. A log listed twice is refused
+    (:func:`ropod_sysid.io.check_distinct`); with ``options.split_gaps`` a log with gaps in
+    time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`).
     """
     from ropod_sysid.distributed import pool
-    from ropod_sysid.stream import DEFAULT_CHUNK, check_source, log_triangles
+    from ropod_sysid.stream import DEFAULT_CHUNK, check_source, piece_triangles
 
     options = options or FitOptions()
     if not paths:
         raise InputError("no logs given; pass one or more log files")
     paths = [str(p) for p in paths]
+    check_distinct(paths)
     for p in paths:
         check_source(p, platform)
     say = progress or (lambda _msg: None)
@@ -248,10 +262,11 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
                 + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
-            parts = run(log_triangles, paths, platform=platform, span=options.span,
+            parts = run(piece_triangles, paths, platform=platform, span=options.span,
                         input_delay=delay, friction=options.friction,
-                        chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step)
-            return [(p, tri, notes) for p, (tri, notes) in zip(paths, parts, strict=True)]
+                        chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step,
+                        split_gaps=options.split_gaps)
+            return [piece for pieces in parts for piece in pieces]
 
         return _fit(reduce, platform, options)
 

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import GAP_RULE, check_times
 from ropod_sysid.odometry import base_twist
 from ropod_sysid.platform import Platform
 
@@ -131,6 +132,11 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         notes_w.append(f"{gap_idx.size} gap{'s' if gap_idx.size > 1 else ''} longer than "
                        f"{c.gap_factor:g}× the median interval, the longest "
                        f"{float(dt[worst]):.4g} s at t={float(t[worst]):.3f} s")
+    refused = check_times(t, log.source, gaps="allow").gaps if n else []
+    if refused:
+        notes_w.append(f"{len(refused)} of them the fit refuses ({GAP_RULE}): give fit, validate "
+                       f"and report --split-gaps to fit the {len(refused) + 1} pieces as "
+                       "separate logs")
     if dt_med > 0 and jitter > 0.1 * dt_med:
         notes_w.append(f"sample interval jitter {jitter:.3g} s is over 10% of the median "
                        f"{dt_med:.3g} s")
@@ -172,7 +178,7 @@ def inspect_file(path: str | Path, platform: Platform,
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        log = read_log(path, platform)
+        log = read_log(path, platform, gaps="allow")  # gaps are a finding here
     return inspect_log(log, platform, criteria)
 
 

@@ -28,6 +28,7 @@ import numpy as np
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import HEAD_STEPS, MIN_SAMPLES_PIECE, check_times
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import odometry_from
 from ropod_sysid.params import Friction
@@ -36,7 +37,7 @@ from ropod_sysid.solve import Triangles, qr_triangle
 
 DEFAULT_SPAN_S = 0.1
 QR_LEAF_ROWS = 256  # rows per leaf QR of a block's TSQR (small: fast, cache-resident)
-GRID_STEPS = 10_000  # the sample time comes from the first this many steps
+GRID_STEPS = HEAD_STEPS  # the sample time comes from the first this many steps
 UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
 ROWS_PER_SPAN = 10  # default row grid: about this many equation rows per smoother span
 
@@ -72,6 +73,54 @@ def jitter_note(source: str, max_step: float, min_step: float, dt: float) -> str
     """The note of a log whose sample times were put on a uniform grid."""
     return (f"{source}: sample times jitter (max step {max_step:.4g} s, min {min_step:.4g} s); "
             f"resampled to a uniform {dt:.4g} s grid")
+
+
+class TooShort(InputError):
+    """A log (or a piece of one, with --split-gaps) too short for the smoother span."""
+
+
+def check_length(source: str, n: int, k: int, dt: float, trim: int) -> None:
+    """Enough samples ``n`` on the grid for a smoother span of ``k`` samples and the ``trim``
+    samples each end loses, else :class:`TooShort`."""
+    if n < 2 * trim + k:
+        raise TooShort(
+            f"{source}: {n} samples are too few for a smoother span of {k} samples "
+            f"({k * dt:.3g} s); record a longer run or use a shorter --span")
+
+
+def check_piece_samples(source: str, n: int) -> None:
+    """A piece between gaps needs a few samples to have a grid at all, else :class:`TooShort`."""
+    if n < MIN_SAMPLES_PIECE:
+        raise TooShort(f"{source}: only {n} sample{'s' if n != 1 else ''}")
+
+
+def left_out(exc: TooShort) -> str:
+    """The note of a piece too short to fit, left out (--split-gaps)."""
+    return f"{exc} — left out: a piece between gaps too short to fit"
+
+
+def usable_pieces(pieces: list[Log], span: Span | None = None, row_step: int | None = None,
+                  ) -> tuple[list[Log], list[str]]:
+    """The pieces of logs split at their gaps (:func:`ropod_sysid.io.timebase.split_log`)
+    long enough for the smoother span, and a note for each one left out (the criterion of
+    :func:`preprocess` and of the streamed pass: the samples on the piece's own grid)."""
+    span = span or Span.parse(None)
+    kept, notes = [], []
+    for log in pieces:
+        try:
+            check_piece_samples(log.source, log.n_samples)
+            dt = grid_step(log.t)
+            n = log.n_samples if on_grid(np.diff(log.t), dt) else \
+                len(signals.resample_uniform(log.t, log.t, dt)[0])
+            k = span.samples(dt, n)
+            check_length(log.source, n, k, dt, RowGrid.for_span(k, row_step).trim(k))
+            kept.append(log)
+        except TooShort as exc:
+            notes.append(left_out(exc))
+    if not kept and pieces:
+        raise InputError(f"every piece between the gaps in time is too short to fit "
+                         f"({'; '.join(notes[:3])}); record longer runs or use a shorter --span")
+    return kept, notes
 
 
 @dataclass
@@ -206,6 +255,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     span = span or Span.parse(None)
     notes = list(log.notes)
     t = log.t
+    check_times(t, log.source)  # (a log read from a file was checked by its reader)
     delta = np.unwrap(log.delta, axis=0)
     phi, current = log.phi, log.current
     pose = log.pose
@@ -224,10 +274,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     k = span.samples(dt, n)
     grid = RowGrid.for_span(k, row_step)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
-    if n < 2 * trim + k:
-        raise InputError(
-            f"{log.source}: {n} samples are too few for a smoother span of {k} samples "
-            f"({k * dt:.3g} s); record a longer run or use a shorter --span")
+    check_length(log.source, n, k, dt, trim)
     delta_s = signals.loess(delta, k)
     phi_s = signals.loess(phi, k)
     if pose is None:

@@ -266,6 +266,11 @@ def test_non_increasing_time(tmp_path, t_bad):
     fields[0] = t_bad
     lines[4] = ",".join(fields)
     p = write(tmp_path, lines)
+    if t_bad == "0.2":  # a duplicated timestamp is named as such
+        assert error_of(p) == (f"{p}: line 5: time t=0.2 repeats t=0.2 of line 4 (a duplicated "
+                               "timestamp); time must strictly increase — remove the repeated "
+                               "sample")
+        return
     assert error_of(p) == (f"{p}: line 5: time t={float(t_bad)!r} is not after t=0.2 on line 4; "
                            "time must strictly increase — sort the rows or remove repeated "
                            "samples")

@@ -29,6 +29,7 @@ import pyarrow.csv as pacsv
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import Gaps, Locate, TimeBase, check_order, check_times, checked_chunks
 from ropod_sysid.platform import Platform
 
 POSE_COLUMNS = ("x_b", "y_b", "theta_b")
@@ -56,13 +57,14 @@ def contract_columns(units: list[str]) -> list[str]:
 # reading
 
 
-def read_csv_log(path: str | Path, platform: Platform) -> Log:
+def read_csv_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
     """Read a contract CSV log for ``platform`` (``.csv``, or gzip-compressed ``.csv.gz``).
 
     Columns ``t``, ``delta_u``, ``phi_uL``, ``phi_uR``, ``cur_uL``, ``cur_uR`` for every unit
     ``u`` of the platform are required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
     none); other columns are ignored. Every problem raises :class:`InputError` with one line that
-    names the file, the line and/or column, and the fix.
+    names the file, the line and/or column, and the fix; so does a bad time base
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
     """
     where = str(path)
     path = Path(path)
@@ -75,35 +77,41 @@ def read_csv_log(path: str | Path, platform: Platform) -> Log:
         data = _diagnose(path, where, n_fields, wanted, col_idx)
 
     _check_rows(where, data.shape[1], MIN_SAMPLES)
-    _check_time(path, where, data[0])
+    check_times(data[0], where, _line_numbers(path), gaps)
     return _to_log(data, platform, pose_present, where)
 
 
 def iter_csv_log(path: str | Path, platform: Platform, chunk_rows: int = 50_000,
-                 ) -> Iterator[Log]:
+                 gaps: Gaps = "error") -> Iterator[Log]:
     """Read a contract CSV log (``.csv`` or ``.csv.gz``) as consecutive logs of ``chunk_rows``
     samples (the last one shorter), in memory bounded by the chunk size.
 
     The checks and messages are those of :func:`read_csv_log`, applied chunk by chunk with the
     file's line numbers: the header and columns before the first chunk; a row that Arrow
-    refuses, a NaN or infinite value, or time not increasing (also across chunks) raise
-    :class:`InputError` when the pass reaches them — chunks before it may already have been
-    yielded, so a consumer must not act on a partial pass. Too few rows raise at the end.
+    refuses, a NaN or infinite value, or a bad time base (:mod:`ropod_sysid.io.timebase`,
+    checked across chunks) raise :class:`InputError` when the pass reaches them — chunks
+    before it may already have been yielded, so a consumer must not act on a partial pass.
+    Too few rows raise at the end.
     """
     if chunk_rows < 1:
         raise ValueError(f"chunk_rows must be positive, got {chunk_rows}")
     where = str(path)
     path = Path(path)
-    n_fields, wanted, col_idx, pose_present = _layout(path, where, platform)
+    layout = _layout(path, where, platform)
+    tb = TimeBase(where, _line_numbers(path), gaps)
+    return checked_chunks(_csv_chunks(path, where, platform, chunk_rows, layout), tb)
+
+
+def _csv_chunks(path: Path, where: str, platform: Platform, chunk_rows: int,
+                layout: tuple[int, list[str], list[int], bool]) -> Iterator[Log]:
+    """The chunks of :func:`iter_csv_log` before the time checks."""
+    n_fields, wanted, col_idx, pose_present = layout
     rows = 0  # rows yielded
-    t_prev: float | None = None
     pending: list[np.ndarray] = []  # held back until there are enough rows for a log
 
     def emit(data: np.ndarray) -> Log:
-        nonlocal rows, t_prev
-        _check_time(path, where, data[0], rows, t_prev)
+        nonlocal rows
         rows += data.shape[1]
-        t_prev = float(data[0, -1])
         return _to_log(data, platform, pose_present, where)
 
     blocks = _stream_data(path, where, n_fields, wanted, col_idx, chunk_rows)
@@ -170,7 +178,7 @@ def _rechunk(blocks: Iterator[np.ndarray], rows: int) -> Iterator[np.ndarray]:
 def _check_rows_and_time(path: Path, where: str, t: np.ndarray, min_rows: int) -> None:
     """Enough data rows, and strictly increasing time (one-line errors with file lines)."""
     _check_rows(where, t.shape[0], min_rows)
-    _check_time(path, where, t)
+    check_order(t, where, _line_numbers(path))
 
 
 def _check_rows(where: str, n: int, min_rows: int) -> None:
@@ -183,23 +191,6 @@ def _check_rows(where: str, n: int, min_rows: int) -> None:
         raise InputError(
             f"{where}: only {n} data row{'s' if n != 1 else ''}; at least {min_rows} samples "
             "are needed — use a longer log"
-        )
-
-
-def _check_time(path: Path, where: str, t: np.ndarray, row0: int = 0,
-                t_prev: float | None = None) -> None:
-    """Time strictly increasing over data rows row0… (``t_prev``: the time of row row0 − 1)."""
-    ext = t if t_prev is None else np.concatenate([[t_prev], t])
-    first = row0 if t_prev is None else row0 - 1  # data row of ext[0]
-    steps = np.diff(ext)
-    bad = np.flatnonzero(~(steps > 0))
-    if bad.size:
-        k = int(bad[0])
-        lines = _data_row_lines(path, first + k + 2)
-        raise InputError(
-            f"{where}: line {lines[first + k + 1]}: time t={float(ext[k + 1])!r} is not after "
-            f"t={float(ext[k])!r} on line {lines[first + k]}; time must strictly increase — "
-            "sort the rows or remove repeated samples"
         )
 
 
@@ -684,6 +675,14 @@ def _slow_read(path: Path, where: str, n_fields: int, wanted: list[str],
             f"looks truncated; remove line {short[0]}"
         )
     return np.array(rows, dtype=np.float64).reshape(-1, len(col_idx)).T
+
+
+def _line_numbers(path: Path) -> Locate:
+    """``locate`` of :mod:`ropod_sysid.io.timebase` for a CSV log: the data rows' file lines."""
+    def locate(rows: Sequence[int]) -> list[str]:
+        lines = _data_row_lines(path, max(rows) + 1)
+        return [f"line {lines[r]}" for r in rows]
+    return locate
 
 
 def _data_row_lines(path: Path, count: int) -> list[int]:

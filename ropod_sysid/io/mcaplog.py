@@ -48,6 +48,7 @@ from mcap.writer import Writer as McapWriter
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import Gaps, TimeBase, check_times, checked_chunks, message_numbers
 from ropod_sysid.platform import Platform
 
 try:  # the compressors mcap uses; their errors mean a broken chunk
@@ -438,12 +439,13 @@ def _no_data(scan: McapScan, where: str, what: str) -> InputError:
     return InputError(f"{where}: the MCAP file has {what}; no log messages to read")
 
 
-def read_mcap_log(path: str | Path, platform: Platform) -> Log:
+def read_mcap_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
     """Read an MCAP log (our layout, JSON or ROS 2, or the smart-wheel layout) for ``platform``.
 
     Damage stops reading: the messages before it are kept with a warning (``warnings.warn`` and
     ``Log.notes``) saying how many were recovered; with fewer than 3 recovered, or when the file
-    is no MCAP at all, :class:`InputError` (one line) is raised.
+    is no MCAP at all, :class:`InputError` (one line) is raised; so is a bad time base
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
     """
     where = str(path)
     scan = scan_mcap(path)
@@ -463,9 +465,10 @@ def read_mcap_log(path: str | Path, platform: Platform) -> Log:
         from ropod_sysid.io.smartwheel import frames_from_messages, frames_to_log
 
         frames = frames_from_messages(decoded, platform, where, stream.encoding)
-        log = frames_to_log(frames, platform, where, warn=False)
+        log = frames_to_log(frames, platform, where, warn=False, gaps=gaps)
     else:
         log = _contract_log(decoded, stream.encoding, platform, where, damage is not None)
+        check_times(log.t, where, message_numbers(), gaps)
     if damage:
         log.notes.insert(0, _damage_note(n, len(stream.messages), damage, scan, where))
     for note in log.notes:
@@ -473,7 +476,8 @@ def read_mcap_log(path: str | Path, platform: Platform) -> Log:
     return log
 
 
-def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> Iterator[Log]:
+def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000,
+                  gaps: Gaps = "error") -> Iterator[Log]:
     """:func:`read_mcap_log` as consecutive logs of ``chunk`` messages, in memory bounded by
     the chunk: a first pass over the records finds the channels, counts the messages and
     notes any damage (nothing is kept), a second decodes the chosen channel's messages as
@@ -487,27 +491,27 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> 
     scan = scan_mcap(path, keep_messages=False)
     stream = pick_stream(scan, where)
     if stream.layout != "contract":
-        log = read_mcap_log(path, platform)
-        for start in range(0, log.n_samples, chunk):
-            yield log.slice(start, start + chunk)
-        return
+        log = read_mcap_log(path, platform, gaps)
+        return (log.slice(start, start + chunk) for start in range(0, log.n_samples, chunk))
+    tb = TimeBase(where, message_numbers(), gaps)
+    return checked_chunks(_contract_chunks(path, platform, chunk, scan, stream), tb)
+
+
+def _contract_chunks(path: str | Path, platform: Platform, chunk: int, scan: McapScan,
+                     stream: Stream) -> Iterator[Log]:
+    """The chunks of :func:`iter_mcap_log` of the contract layout, before the time checks."""
+    where = str(path)
     decode = _decoder(stream, where)
     cid = stream.channel.id
     damage = scan.damage
     buf: list[Any] = []
     done = 0  # messages yielded
-    t_last: float | None = None
 
     def emit(msgs: list[Any], final: bool) -> Log:
-        nonlocal done, t_last
+        nonlocal done
         log = _contract_log(msgs, stream.encoding, platform, where, damage is not None,
                             offset=done, whole=final and done == 0)
-        if t_last is not None and not log.t[0] > t_last:
-            raise InputError(f"{where}: message {done}: time t={float(log.t[0])!r} is not "
-                             f"after t={t_last!r} of message {done - 1}; time must strictly "
-                             "increase")
         done += len(msgs)
-        t_last = float(log.t[-1])
         if final and damage:
             log.notes.insert(0, _damage_note(done, scan.counts.get(cid, 0), damage, scan,
                                              where))
@@ -651,13 +655,6 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
     if whole and n < MIN_SAMPLES:
         raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
                          f"{MIN_SAMPLES} samples are needed — use a longer log")
-    steps = np.diff(t)
-    nonincr = np.flatnonzero(~(steps > 0))
-    if nonincr.size:
-        k = int(nonincr[0])
-        raise InputError(f"{where}: message {offset + k + 1}: time t={float(t[k + 1])!r} is "
-                         f"not after t={float(t[k])!r} of message {offset + k}; time must "
-                         "strictly increase")
     return Log(t=t, units=list(units), delta=np.ascontiguousarray(vals[:, :, 0]),
                phi=np.ascontiguousarray(vals[:, :, 1:3]),
                current=np.ascontiguousarray(vals[:, :, 3:5]), pose=pose, source=where)

@@ -61,6 +61,7 @@ import pyarrow.csv as pacsv
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import Gaps, check_times
 from ropod_sysid.platform import Platform
 
 SW_TOPIC = "/sw_ethercat_parser/data"
@@ -258,11 +259,13 @@ def _monotonic(ts: np.ndarray) -> np.ndarray:
 
 def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | None = None, *,
                   voltage_range: tuple[float, float] = VOLTAGE_RANGE,
-                  warn: bool = True) -> Log:
+                  warn: bool = True, gaps: Gaps | None = None) -> Log:
     """The contract log of smart-wheel frames, with the platform's per-unit settings.
 
     Corrupt frames are dropped (see the module description) and reported in ``Log.notes`` (and
-    as a warning when ``warn``). Raises :class:`InputError` when fewer than 3 frames remain.
+    as a warning when ``warn``). Raises :class:`InputError` when fewer than 3 frames remain;
+    with ``gaps`` (the file readers give it) also for a bad time base of the kept frames
+    (:mod:`ropod_sysid.io.timebase`): a dropped frame leaves a step of two frames, no gap.
     """
     where = where or frames.source
     ts = frames.sensor_ts
@@ -301,6 +304,8 @@ def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | Non
     ts0 = ts[keep, 0]
     rel_ns = (ts0 - ts0[0]).astype(np.int64)      # integer subtraction first, then seconds
     t = rel_ns.astype(np.float64) / 1e9
+    if gaps is not None:
+        check_times(t, where, lambda ks: [f"frame #{keep[k]}" for k in ks], gaps)
 
     n = platform.n_units
     delta = np.empty((keep.size, n))
@@ -351,8 +356,9 @@ def is_smartwheel_csv(path: str | Path) -> bool:
     return b"sensors.0." in first
 
 
-def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
-    """Read a CSV in the smart-wheel layout (columns ``sensors.<k>.<field>``) as a contract log."""
+def read_smartwheel_csv(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
+    """Read a CSV in the smart-wheel layout (columns ``sensors.<k>.<field>``) as a contract log
+    (``gaps``: see :func:`frames_to_log`)."""
     where = str(path)
     path = Path(path)
     try:
@@ -418,7 +424,7 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
         notes.append(f"{where}: the smart-wheel data has {count} sensors; the first {n} are "
                      f"read as units {', '.join(platform.unit_names)}")
     frames = SmartWheelFrames(ts, vals, np.zeros(n_rows, dtype=bool), where, notes)
-    return frames_to_log(frames, platform, where)
+    return frames_to_log(frames, platform, where, gaps=gaps)
 
 
 def read_smartwheel(path: str | Path, platform: Platform) -> Log:
