@@ -26,6 +26,10 @@ give after the pass (:meth:`Triangles.mean_square_b`).
 
 :func:`validate_source` does the same for validation: the disturbance observer's causal
 low-pass keeps its filter state across blocks.
+
+The chunks' time base is checked as they come (:mod:`ropod_sysid.io.timebase`): a gap in time
+is an error, or with ``split_gaps`` (:func:`stream_pieces`) the end of one piece and the start
+of the next, each passed through steps 1–3 as a log of its own.
 """
 
 from __future__ import annotations
@@ -345,10 +349,7 @@ class _Grid:
         src = raw if self.tail is None else _Samples.join([self.tail, raw])
         lead = 0 if self.tail is None else len(self.tail) - 1
         steps = np.diff(src.t[lead:])
-        if steps.size:
-            if not steps.min() > 0:
-                raise InputError(f"{self.source}: time does not strictly increase; sort the "
-                                 "samples or remove repeated ones")
+        if steps.size:  # (time increases: iter_chunks checked it, ropod_sysid.io.timebase)
             self.max_step = max(self.max_step, float(steps.max()))
             self.min_step = min(self.min_step, float(steps.min()))
         if not self.resample:
