@@ -42,7 +42,7 @@ def command(in_path: str, out_path: str, platform_path: str, encoding: str | Non
     platform = load_platform(platform_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")       # the same text is in log.notes
-        log = read_log(in_path, platform)
+        log = read_log(in_path, platform, gaps="allow")  # copied as is; fit checks gaps
     enc = encoding or "json"
     if layout == "smartwheel":
         write_smartwheel(log, out_path, platform, encoding=enc)

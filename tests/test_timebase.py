@@ -280,3 +280,14 @@ def test_inspect_reports_gaps_instead_of_failing(d):
     text = " ".join(r.output.split())
     assert "1 of them the fit refuses (a step longer than 5 median steps and 0.02 s is a gap): " \
            "give fit, validate and report --split-gaps to fit the 2 pieces" in text
+
+
+def test_convert_keeps_a_log_with_gaps(d, off_square):
+    r = run("convert", str(d / "gapped.csv"), str(d / "converted.mcap"), "--platform",
+            str(d / "platform.yaml"), "--quiet")
+    assert r.exit_code == 0, r.output
+    a = read_log(d / "gapped.csv", off_square, gaps="allow")
+    b = read_log(d / "converted.mcap", off_square, gaps="allow")
+    assert np.array_equal(a.t, b.t)
+    with pytest.raises(InputError, match="converted.mcap: message 1601: a gap of 10 s"):
+        read_log(d / "converted.mcap", off_square)
