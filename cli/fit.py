@@ -95,8 +95,10 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
 def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span: Span | None,
               row_step: int | None) -> list[Log]:
     """Logs read whole for a report: with --split-gaps their pieces long enough to fit."""
-    logs = read_logs(paths, platform, split_gaps)
-    return usable_pieces(logs, span, row_step)[0] if split_gaps else logs
+    if not split_gaps:
+        return read_logs(paths, platform)
+    return [p for log in read_logs(paths, platform, "allow")
+            for p in usable_pieces(log, span, row_step)]
 
 
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")

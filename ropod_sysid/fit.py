@@ -20,7 +20,6 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
-from ropod_sysid.io.timebase import split_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Friction, kind_of
 from ropod_sysid.platform import Platform
@@ -207,18 +206,15 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
 
     Each log is preprocessed whole (:func:`ropod_sysid.regressor.preprocess`); for log files of
     any length use :func:`fit_files`, which streams them. With ``options.split_gaps`` a log
-    with gaps in time is fitted as its pieces (:func:`ropod_sysid.io.timebase.split_log`; those
-    too short for the span are left out with a note on the first log).
+    with gaps in time is fitted as its pieces (:func:`ropod_sysid.regressor.usable_pieces`).
     """
     options = options or FitOptions()
     if not logs:
         raise InputError("no logs given; pass one or more log files")
     model = PlatformModel(platform)
     say = progress or (lambda _msg: None)
-    left: list[str] = []
     if options.split_gaps:
-        logs, left = usable_pieces([p for log in logs for p in split_log(log)], options.span,
-                                   options.row_step)
+        logs = [p for log in logs for p in usable_pieces(log, options.span, options.row_step)]
 
     def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
         out = []
@@ -226,7 +222,6 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
             out.append((log.source, triangles(model, pre, options.friction), pre.notes))
-        out[0][2].extend(left)
         return out
 
     return _fit(reduce, platform, options)

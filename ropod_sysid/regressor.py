@@ -28,7 +28,7 @@ import numpy as np
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.timebase import HEAD_STEPS, MIN_SAMPLES_PIECE, check_times
+from ropod_sysid.io.timebase import HEAD_STEPS, MIN_SAMPLES_PIECE, check_times, split_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import odometry_from
 from ropod_sysid.params import Friction
@@ -99,28 +99,37 @@ def left_out(exc: TooShort) -> str:
     return f"{exc} — left out: a piece between gaps too short to fit"
 
 
-def usable_pieces(pieces: list[Log], span: Span | None = None, row_step: int | None = None,
-                  ) -> tuple[list[Log], list[str]]:
-    """The pieces of logs split at their gaps (:func:`ropod_sysid.io.timebase.split_log`)
-    long enough for the smoother span, and a note for each one left out (the criterion of
-    :func:`preprocess` and of the streamed pass: the samples on the piece's own grid)."""
+def no_piece_left(source: str, dropped: list[str]) -> InputError:
+    """The error of a log split at its gaps whose every piece is too short to fit."""
+    more = f"; and {len(dropped) - 3} more" if len(dropped) > 3 else ""
+    return InputError(f"{source}: every piece between the gaps in time is too short to fit "
+                      f"({'; '.join(dropped[:3])}{more}); record longer runs or use a shorter "
+                      "--span")
+
+
+def usable_pieces(log: Log, span: Span | None = None, row_step: int | None = None,
+                  ) -> list[Log]:
+    """A log (read with ``gaps="allow"``) split at its gaps
+    (:func:`ropod_sysid.io.timebase.split_log`): the pieces long enough for the smoother span,
+    the first one noting those left out (the criterion of :func:`preprocess` and of the
+    streamed pass: the samples on the piece's own grid); none left is an error."""
     span = span or Span.parse(None)
     kept, notes = [], []
-    for log in pieces:
+    for piece in split_log(log):
         try:
-            check_piece_samples(log.source, log.n_samples)
-            dt = grid_step(log.t)
-            n = log.n_samples if on_grid(np.diff(log.t), dt) else \
-                len(signals.resample_uniform(log.t, log.t, dt)[0])
+            check_piece_samples(piece.source, piece.n_samples)
+            dt = grid_step(piece.t)
+            n = piece.n_samples if on_grid(np.diff(piece.t), dt) else \
+                len(signals.resample_uniform(piece.t, piece.t, dt)[0])
             k = span.samples(dt, n)
-            check_length(log.source, n, k, dt, RowGrid.for_span(k, row_step).trim(k))
-            kept.append(log)
+            check_length(piece.source, n, k, dt, RowGrid.for_span(k, row_step).trim(k))
+            kept.append(piece)
         except TooShort as exc:
             notes.append(left_out(exc))
-    if not kept and pieces:
-        raise InputError(f"every piece between the gaps in time is too short to fit "
-                         f"({'; '.join(notes[:3])}); record longer runs or use a shorter --span")
-    return kept, notes
+    if not kept:
+        raise no_piece_left(log.source, notes)
+    kept[0].notes.extend(notes)
+    return kept
 
 
 @dataclass

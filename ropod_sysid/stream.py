@@ -74,6 +74,7 @@ from ropod_sysid.regressor import (
     grid_step,
     jitter_note,
     left_out,
+    no_piece_left,
     on_grid,
     row_inputs,
     row_system,
@@ -742,11 +743,8 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
                 resample = True
     kept = [r for r in done if r is not None]
     if not kept:
-        more = f"; and {len(dropped) - 3} more" if len(dropped) > 3 else ""
-        raise InputError(f"{source_name(source)}: every piece between the gaps in time is too "
-                         f"short to fit ({'; '.join(dropped[:3])}{more}); record longer runs "
-                         "or use a shorter --span")
-    kept[0].notes[1:1] = dropped  # after its piece note
+        raise no_piece_left(source_name(source), dropped)
+    kept[0].notes.extend(dropped)
     return kept
 
 

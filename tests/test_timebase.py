@@ -143,6 +143,8 @@ def test_split_gaps_equals_the_pieces_as_separate_logs(d, off_square, runs_off_s
     mem = fit_logs([read_log(d / "gapped.csv", off_square, gaps="allow")], off_square,
                    FitOptions(split_gaps=True))
     assert np.max(np.abs(mem.solution.values - vb) / np.abs(vb)) < 1e-6
+    assert [lf.source for lf in mem.logs] == [lf.source for lf in split.logs]
+    assert mem.logs[1].notes[0] == split.logs[1].notes[0]
     # the command: refused without the flag (test above), the pieces in the parameter file
     r = cli(d, "fit", "gapped.csv", out="split.json", extra=("--split-gaps",))
     assert r.exit_code == 0, r.output
@@ -169,6 +171,10 @@ def test_split_gaps_leaves_out_short_pieces_or_refuses(d, off_square, runs_off_s
                and "left out" in n for n in res.logs[0].notes)
     ref = fit_files([d / "run.csv"], off_square)
     assert np.allclose(res.solution.values, ref.solution.values, rtol=1e-10)
+    mem = fit_logs([read_log(d / "short_tail.csv", off_square, gaps="allow")], off_square,
+                   FitOptions(split_gaps=True))
+    assert [lf.source for lf in mem.logs] == [lf.source for lf in res.logs]
+    assert res.logs[0].notes[-1] in mem.logs[0].notes
     tiny = joined(a.slice(0, 40), a.slice(0, 30), 3.0)
     write_log(tiny, d / "tiny.csv")
     r = cli(d, "fit", "tiny.csv", out="tiny.json", extra=("--split-gaps",))

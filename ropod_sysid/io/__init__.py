@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.timebase import Gaps, split_log
+from ropod_sysid.io.timebase import Gaps
 from ropod_sysid.platform import Platform
 
 LOG_SUFFIXES = (".csv", ".csv.gz", ".mcap")
@@ -49,14 +49,11 @@ def read_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
     return read_mcap_log(path, platform, gaps)
 
 
-def read_logs(paths: Sequence[str | Path], platform: Platform, split_gaps: bool = False,
+def read_logs(paths: Sequence[str | Path], platform: Platform, gaps: Gaps = "error",
               ) -> list[Log]:
-    """Read logs whole (:func:`read_log`), each listed once (:func:`check_distinct`); with
-    ``split_gaps`` a log with gaps in time becomes its pieces (:func:`split_log`)."""
+    """Read logs whole (:func:`read_log`), each listed once (:func:`check_distinct`)."""
     check_distinct(paths)
-    if not split_gaps:
-        return [read_log(p, platform) for p in paths]
-    return [piece for p in paths for piece in split_log(read_log(p, platform, "allow"))]
+    return [read_log(p, platform, gaps) for p in paths]
 
 
 def check_distinct(paths: Sequence[str | Path], what: str = "log") -> None:

@@ -230,7 +230,7 @@ def split_log(log: Log) -> list[Log]:
         piece = log.slice(a, b)
         piece.source = piece_name(log.source, j)
         piece.piece = j
-        piece.notes.append(piece_note(piece.source, log.source, a, b - a, float(log.t[a]),
+        piece.notes.insert(0, piece_note(piece.source, log.source, a, b - a, float(log.t[a]),
                                       float(log.t[b - 1])))
         pieces.append(piece)
     return pieces
