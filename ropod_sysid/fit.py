@@ -22,8 +22,17 @@ from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Friction, kind_of
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, preprocess, triangles
-from ropod_sysid.solve import RCOND, Solution, Triangles, combined_rms, solve, stack_triangles
+from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles
+from ropod_sysid.solve import (
+    RCOND,
+    Solution,
+    Triangles,
+    check_fixed,
+    check_rcond,
+    combined_rms,
+    solve,
+    stack_triangles,
+)
 
 WeightRotation = Literal["auto", "none"] | float
 
@@ -41,6 +50,20 @@ class FitOptions:
     rcond: float = RCOND
     max_delay: float = 0.05
     row_step: int | None = None  # samples between equation rows; None: ~10 per span
+
+    def __post_init__(self) -> None:
+        """Nonsense values are a one-line :class:`InputError` before any work."""
+        check_rcond(self.rcond)
+        if self.input_delay != "auto":
+            check_input_delay(float(self.input_delay),
+                              self.span.value if self.span.seconds else None)
+        if not (math.isfinite(self.max_delay) and self.max_delay > 0):
+            raise InputError(f"max_delay {self.max_delay:g}: must be a finite number of "
+                             "seconds > 0")
+        w = self.weight_rotation
+        if w not in ("auto", "none") and not (isinstance(w, int | float)
+                                               and math.isfinite(w) and w > 0):
+            raise InputError(f"--weight-rotation {w!r}: use auto, none or a finite number > 0")
 
 
 @dataclass
@@ -260,6 +283,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay."""
     model = PlatformModel(platform)
     names = model.parameter_names(options.friction)
+    check_fixed(options.fix, names)  # before the logs are read
     delay = 0.0
     if options.input_delay == "auto":
         def cost(d: float) -> float:
@@ -268,12 +292,18 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
 
         from scipy.optimize import minimize_scalar  # imported here: only the delay search
 
-        res = minimize_scalar(cost, bounds=(0.0, options.max_delay),
+        top = min(options.max_delay, options.span.value) if options.span.seconds \
+            else options.max_delay  # at most one span (check_input_delay)
+        res = minimize_scalar(cost, bounds=(0.0, top),
                                              method="bounded", options={"xatol": 2e-4})
         delay = float(res.x)
     else:
         delay = float(options.input_delay)
     reduced = reduce(delay)
+    for source, tri, _ in reduced:
+        if tri.torque_free():
+            raise InputError(f"{source}: the motor currents are all zero, so there is no torque "
+                             "to fit the parameters to; check the log's current columns")
     systems = [tri for _, tri, _ in reduced]
     solution, weights = fit_systems(systems, names, options)
     per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri)

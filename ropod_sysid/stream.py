@@ -56,6 +56,7 @@ from ropod_sysid.regressor import (
     RowGrid,
     Span,
     block_triangles,
+    check_input_delay,
     grid_step,
     jitter_note,
     on_grid,
@@ -440,6 +441,7 @@ class _Blocks:
     def start(self, dt: float) -> None:
         self.dt = dt
         self.k = self.span.samples(dt, 0)
+        check_input_delay(self.delay, self.k * dt)
         self.c = (self.k - 1) // 2
         self.grid = RowGrid.for_span(self.k, self.row_step)
         self.halo = self.grid.halo
@@ -474,6 +476,7 @@ class _Blocks:
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
         self.tri.samples = n - 2 * self.trim
+        self.tri.duration = (n - 1) * self.dt
         self.tri.correlation = self.grid.correlation
         return self.tri, self.obs, n
 
