@@ -76,7 +76,7 @@ def option_name(param: click.Parameter | None, default: str = "value") -> str:
 
 
 def _g(x: float) -> str:
-    return f"{x:g}"
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
 
 
 class Number(click.ParamType):
@@ -98,17 +98,17 @@ class Number(click.ParamType):
         self.name = "integer" if integer else "float"
 
     def range_text(self) -> str:
-        """The allowed values in words, e.g. 'a number in (0, 1)', 'a whole number ≥ 1'."""
+        """The allowed values in words, e.g. 'a finite number in (0, 1)', 'a whole number ≥ 1'."""
         what = "a whole number" if self.integer else "a finite number"
-        unit = f" [{self.unit}]" if self.unit else ""
+        unit = f" {self.unit}" if self.unit else ""
         lo, hi = self.low, self.high
         if lo is not None and hi is not None:
-            return (f"{what}{unit} in {'(' if self.low_open else '['}{_g(lo)}, {_g(hi)}"
-                    f"{')' if self.high_open else ']'}")
+            return (f"{what} in {'(' if self.low_open else '['}{_g(lo)}, {_g(hi)}"
+                    f"{')' if self.high_open else ']'}{unit}")
         if lo is not None:
-            return f"{what}{unit} {'>' if self.low_open else '≥'} {_g(lo)}"
+            return f"{what} {'>' if self.low_open else '≥'} {_g(lo)}{unit}"
         if hi is not None:
-            return f"{what}{unit} {'<' if self.high_open else '≤'} {_g(hi)}"
+            return f"{what} {'<' if self.high_open else '≤'} {_g(hi)}{unit}"
         return f"{what}{unit}"
 
     def check(self, value: Any, name: str) -> float | int:

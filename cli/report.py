@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import SpanType, platform_option, quiet_option, reports_errors
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import read_log
 from ropod_sysid.io.paramfile import read_parameter_file
@@ -26,12 +26,13 @@ from ropod_sysid.regressor import Span
                    "truth of a simulation).")
 @click.option("--validate", "validate_paths", multiple=True, type=click.Path(dir_okay=False),
               help="Validation log (repeatable): residuals and the disturbance observer.")
-@click.option("--span", default=None,
-              help="LOESS span: samples (21) or seconds (0.1s). Default: the parameter file's.")
+@click.option("--span", type=SpanType(), default=None,
+              help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default: the "
+                   "parameter file's.")
 @quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_path: str,
-            compare_path: str | None, validate_paths: tuple[str, ...], span: str | None,
+            compare_path: str | None, validate_paths: tuple[str, ...], span: Span | None,
             quiet: bool) -> None:
     """Write the HTML report of the parameters in --params on LOGS (the fit's logs).
 
@@ -46,10 +47,10 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     compare = read_parameter_file(compare_path) if compare_path is not None else None
-    sp = Span.parse(span) if span is not None else None
     loaded = [read_log(p, platform) for p in logs]
     validation = [read_log(p, platform) for p in validate_paths]
-    result, notes = result_from_parameter_file(platform, loaded, pfile, sp, where=params_path)
+    result, notes = result_from_parameter_file(platform, loaded, pfile, span,
+                                                where=params_path)
     write_fit_report(result, loaded, out_path, compare=compare,
                      compare_label=Path(compare_path).name if compare_path else None,
                      validation_logs=validation, params_source=params_path, notes=notes)

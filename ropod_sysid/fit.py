@@ -20,7 +20,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import Friction, kind_of
+from ropod_sysid.params import Friction, kind_of, parameter_names
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles
 from ropod_sysid.solve import (
@@ -177,6 +177,44 @@ def fit_settings(pfile: ParameterFile, where: str) -> tuple[Span, float, int | N
     None for auto), from its extras; files without them get the defaults. A bad value is a
     one-line :class:`InputError` naming ``where``."""
     return _span_of(pfile, where), _delay_of(pfile, where), _row_step_of(pfile, where)
+
+
+def parameters_of(pfile: ParameterFile, platform: Platform, where: str,
+                  ) -> tuple[Friction, dict[str, float]]:
+    """The friction model and name → value of a fit's parameter file, for ``platform``.
+
+    Refused with a one-line :class:`InputError` naming ``where``: a file of another platform,
+    a ``friction`` other than per-wheel or shared, names that are no parameters of that model
+    and these units, values that are null, NaN or infinite, and parameters of the model that
+    are missing (a unit's friction left out would silently be 0).
+    """
+    if pfile.platform != platform.name:
+        raise InputError(f"{where}: the parameter file is for platform '{pfile.platform}', the "
+                         f"platform file describes '{platform.name}'; give the matching files")
+    values = pfile.values()
+    declared = pfile.extras.get("friction")
+    if declared is not None and declared not in ("per-wheel", "shared"):
+        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
+    friction: Friction = declared or (  # type: ignore[assignment]
+        "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel")
+    units = platform.unit_names
+    names = parameter_names(units, friction)
+    unknown = [k for k in values if k not in names]
+    if unknown:
+        raise InputError(
+            f"{where}: parameter(s) {', '.join(unknown[:6])} are not parameters of the "
+            f"{friction} friction model of units {', '.join(units)}; is this the parameter file "
+            "of this platform?")
+    bad = [k for k, v in values.items() if not math.isfinite(v)]
+    if bad:
+        raise InputError(f"{where}: parameter '{bad[0]}' is null, NaN or infinite; a parameter "
+                         "file gives a finite value for every parameter")
+    missing = [k for k in names if k not in values]
+    if missing:
+        raise InputError(f"{where}: parameter(s) {', '.join(missing[:6])}"
+                         f"{' …' if len(missing) > 6 else ''} missing; the {friction} friction "
+                         f"model of units {', '.join(units)} needs all of {len(names)}")
+    return friction, values
 
 
 def physical_bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
