@@ -8,7 +8,6 @@ import click
 
 from ropod_sysid.cli.common import (
     POSITIVE_INT,
-    Number,
     SpanType,
     platform_option,
     quiet_option,
@@ -131,7 +130,6 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 @click.option("--input-delay", default="0", show_default=True,
               help="Lag of the motion behind the logged torque: seconds or auto.")
 @click.option("--rcond", default=RCOND, show_default=True,
-              type=Number(0, 1, low_open=True, high_open=True),
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the HTML fit report here.")

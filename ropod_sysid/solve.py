@@ -212,10 +212,6 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     sv = np.linalg.svd(cs, compute_uv=False)
     tol = rcond * sv[0]
     rank = int(np.sum(sv > tol))
-    if rank == 0:
-        raise IdentifiabilityError(
-            f"the regressor has rank 0 at --rcond {rcond:g}: no direction counts as "
-            "identifiable; use a smaller --rcond (default 1e-4) or logs with more motion")
     q_free = len(free)
     values = np.zeros(p)
     values[fix_idx] = m_fix
