@@ -157,12 +157,22 @@ class RowGrid:
     def for_span(cls, k: int, step: int | None = None) -> RowGrid:
         """The grid for a smoother span of ``k`` samples: ``step`` samples apart, or by
         default ⌊k / :data:`ROWS_PER_SPAN`⌋ (at least 1)."""
-        if step is not None and (int(step) != step or step < 1):
-            raise InputError(f"--row-step {step!r}: give a positive whole number of samples "
-                             "(1 = every sample) or leave it out for about ten rows per span")
+        cls.check_step(step)
+        if step is not None and step > k:
+            raise InputError(f"--row-step {step}: more than the smoother span of {k} samples; "
+                             "rows farther apart than a span are not filtered like the samples "
+                             f"(eq. 36 on both sides); give at most {k}, auto, or a longer "
+                             "--span")
         d = int(step) if step is not None else max(1, k // ROWS_PER_SPAN)
         kr = max(int(round(k / d)), 3)
         return cls(d, kr if kr % 2 else kr + 1)
+
+    @staticmethod
+    def check_step(step: int | None) -> None:
+        """A row step is None (auto) or a positive whole number of samples."""
+        if step is not None and (int(step) != step or step < 1):
+            raise InputError(f"--row-step {step!r}: give a positive whole number of samples "
+                             "(1 = every sample) or leave it out for about ten rows per span")
 
     @property
     def halo(self) -> int:

@@ -655,7 +655,7 @@ def stream_log(source: Source, platform: Platform, span: Span | None = None,
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
-    RowGrid.for_span(3, row_step)  # a bad row step fails before the file is opened
+    RowGrid.check_step(row_step)  # a bad row step fails before the file is opened
     with single_thread_blas():
         try:
             return _pass(source, platform, span, input_delay, friction, chunk, params,

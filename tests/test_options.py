@@ -79,6 +79,18 @@ def test_input_delay_beyond_a_span_in_samples(tmp_path, files):  # noqa: F811
     assert not out.exists()
 
 
+def test_row_step_beyond_the_span(tmp_path, files):  # noqa: F811
+    d, logs = files
+    out = tmp_path / "p.json"
+    r = run("fit", str(logs[0]), "--platform", str(d / "platform.yaml"), "--out", str(out),
+            "--row-step", "50")
+    one_line_error(r)
+    assert error_line(r) == ("--row-step 50: more than the smoother span of 21 samples; rows "
+                             "farther apart than a span are not filtered like the samples (eq. 36 "
+                             "on both sides); give at most 21, auto, or a longer --span")
+    assert not out.exists()
+
+
 def setpoint_csv(path) -> str:
     t = np.arange(0.0, 1.0001, 0.01)
     np.savetxt(path, np.column_stack([t, 0.3 * np.sin(np.pi * t), 0 * t, 0 * t]),
