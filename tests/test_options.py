@@ -52,8 +52,11 @@ FIT_CASES = [
 ]
 
 
-def error_line(result) -> str:
-    return [ln for ln in result.output.splitlines() if ln.strip()][0].removeprefix("error: ")
+def refused(result, message: str, out) -> None:
+    """One line, exactly ``error: message``, exit status 2, and ``out`` not written."""
+    one_line_error(result)
+    assert result.output.strip() == f"error: {message}"
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(("args", "message"), FIT_CASES, ids=[" ".join(a) for a, _ in FIT_CASES])
@@ -62,9 +65,7 @@ def test_fit_numeric_options(tmp_path, files, args, message):  # noqa: F811
     out = tmp_path / "p.json"
     r = run("fit", *map(str, logs), "--platform", str(d / "platform.yaml"), "--out", str(out),
             *args)
-    one_line_error(r)
-    assert error_line(r) == message
-    assert not out.exists()
+    refused(r, message, out)
 
 
 def test_input_delay_beyond_a_span_in_samples(tmp_path, files):  # noqa: F811
@@ -73,10 +74,8 @@ def test_input_delay_beyond_a_span_in_samples(tmp_path, files):  # noqa: F811
     out = tmp_path / "p.json"
     r = run("fit", str(logs[0]), "--platform", str(d / "platform.yaml"), "--out", str(out),
             "--span", "21", "--input-delay", "0.2")
-    one_line_error(r)
-    assert error_line(r) == ("--input-delay 0.2: longer than the smoother span (0.105 s); give "
-                             "at most 0.105 s, auto, or a longer --span")
-    assert not out.exists()
+    refused(r, "--input-delay 0.2: longer than the smoother span (0.105 s); give at most "
+               "0.105 s, auto, or a longer --span", out)
 
 
 def test_row_step_beyond_the_span(tmp_path, files):  # noqa: F811
@@ -84,11 +83,9 @@ def test_row_step_beyond_the_span(tmp_path, files):  # noqa: F811
     out = tmp_path / "p.json"
     r = run("fit", str(logs[0]), "--platform", str(d / "platform.yaml"), "--out", str(out),
             "--row-step", "50")
-    one_line_error(r)
-    assert error_line(r) == ("--row-step 50: more than the smoother span of 21 samples; rows "
-                             "farther apart than a span are not filtered like the samples (eq. 36 "
-                             "on both sides); give at most 21, auto, or a longer --span")
-    assert not out.exists()
+    refused(r, "--row-step 50: more than the smoother span of 21 samples; rows farther apart "
+               "than a span are not filtered like the samples (eq. 36 on both sides); give at "
+               "most 21, auto, or a longer --span", out)
 
 
 def setpoint_csv(path) -> str:
@@ -132,9 +129,7 @@ def test_simulate_numeric_options(tmp_path, files, args, message):  # noqa: F811
     r = run("simulate", "--platform", str(d / "platform.yaml"), "--params",
             str(d / "truth.json"), "--trajectory", setpoint_csv(tmp_path / "sp.csv"), "--out",
             str(out), *args)
-    one_line_error(r)
-    assert error_line(r) == message
-    assert not out.exists()
+    refused(r, message, out)
 
 
 @pytest.mark.parametrize(("name", "value", "message"), [
@@ -153,9 +148,7 @@ def test_simulate_refuses_negative_masses_and_inertias(tmp_path, files, name, va
     out = tmp_path / "sim.csv"
     r = run("simulate", "--platform", str(d / "platform.yaml"), "--params", str(params),
             "--trajectory", setpoint_csv(tmp_path / "sp.csv"), "--out", str(out))
-    one_line_error(r)
-    assert error_line(r) == f"{params}: {message}"
-    assert not out.exists()
+    refused(r, f"{params}: {message}", out)
 
 
 TRAJ_CASES = [
@@ -188,9 +181,7 @@ def test_trajectory_numeric_options(tmp_path, files, args, message):  # noqa: F8
              "check": [setpoint_csv(tmp_path / "sp.csv"), "--platform",
                        str(d / "platform.yaml")]}[sub]
     r = run("trajectory", sub, *where, *rest)
-    one_line_error(r)
-    assert error_line(r) == message
-    assert not out.exists()
+    refused(r, message, out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -206,10 +197,8 @@ def test_all_zero_currents_are_an_error(tmp_path, files, runs_off_square):  # no
         paths.append(str(p))
     out = tmp_path / "p.json"
     r = run("fit", *paths, "--platform", str(d / "platform.yaml"), "--out", str(out))
-    one_line_error(r)
-    assert error_line(r) == (f"{paths[0]}: the motor currents are all zero, so there is no "
-                             "torque to fit the parameters to; check the log's current columns")
-    assert not out.exists()
+    refused(r, f"{paths[0]}: the motor currents are all zero, so there is no torque to fit the "
+               "parameters to; check the log's current columns", out)
 
 
 def test_a_log_shorter_than_inspect_calls_enough_is_an_error(tmp_path, files,  # noqa: F811
@@ -220,12 +209,9 @@ def test_a_log_shorter_than_inspect_calls_enough_is_an_error(tmp_path, files,  #
     write_log(runs_off_square[0].log.slice(0, 401), p)  # 2 s at 200 Hz
     out = tmp_path / "p.json"
     r = run("fit", str(p), "--platform", str(d / "platform.yaml"), "--out", str(out))
-    one_line_error(r)
     need = Criteria().min_moving
-    assert error_line(r) == (f"{p}: only 2.0 s of log; record at least {need:g} s of motion: "
-                             "the values of a shorter fit are noise (ropod-sysid inspect shows "
-                             "what a log lacks)")
-    assert not out.exists()
+    refused(r, f"{p}: only 2.0 s of log; record at least {need:g} s of motion: the values of a "
+               "shorter fit are noise (ropod-sysid inspect shows what a log lacks)", out)
 
 
 def test_an_all_zero_solution_is_an_error():
@@ -313,9 +299,7 @@ def test_bad_parameter_files_are_refused(tmp_path, files, fitted, command, case)
     extra = ["--out", str(out)] if command == "report" else []
     r = run(command, str(logs[3]), "--platform", str(d / "platform.yaml"), "--params",
             str(params), *extra)
-    one_line_error(r)
-    assert error_line(r) == f"{params}: {message}"
-    assert not out.exists()
+    refused(r, f"{params}: {message}", out)
 
 
 # ---------------------------------------------------------------------------------------------
