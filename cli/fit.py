@@ -119,8 +119,9 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 @click.option("--span", type=SpanType(), default=None,
               help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default 0.1s.")
 @click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
-              help="Form an equation row every N samples; auto: about ten per span (every "
-                   "10th sample at 1 kHz with 0.1s, every sample at 100 Hz). 1 = every sample.")
+              help="Form an equation row every N samples (at most one span); auto: about ten "
+                   "per span (every 10th sample at 1 kHz with 0.1s, every sample at 100 Hz). "
+                   "1 = every sample.")
 @click.option("--fix", multiple=True, metavar="NAME=VALUE",
               help="Hold a parameter fixed (repeatable), e.g. the weighed masses.")
 @click.option("--weight-rotation", default="auto", show_default=True,
@@ -128,7 +129,8 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 @click.option("--physical", is_flag=True,
               help="Physically consistent fit (bounded least squares); RMS cost reported.")
 @click.option("--input-delay", default="0", show_default=True,
-              help="Lag of the motion behind the logged torque: seconds or auto.")
+              help="Lag of the motion behind the logged torque: seconds, from 0 to one "
+                   "span, or auto.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,

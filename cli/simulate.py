@@ -31,16 +31,18 @@ from ropod_sysid.trajectory import read_trajectory_csv
               help="Setpoint CSV with columns t, vx, vy, omega (base frame).")
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Log to write (.csv or .mcap).")
-@click.option("--rate", default=200.0, show_default=True, help="Log sample rate [Hz].")
+@click.option("--rate", default=200.0, show_default=True,
+              help="Log sample rate [Hz]; divides the integration rate 1/--dt.")
 @click.option("--dt", default=MAX_DT, show_default=True,
               type=Number(0, MAX_DT, low_open=True, unit="s"),
               help="Integration and control step [s] (RK4, at most 1 ms).")
 @click.option("--encoder-counts", type=int, default=None,
-              help="Encoder counts per revolution (default: exact angles).")
+              help="Encoder counts per revolution, at least 16 (default: exact angles).")
 @click.option("--current-noise", default=0.0, show_default=True,
               help="Current measurement noise, standard deviation [A].")
 @click.option("--jitter", default=0.0, show_default=True,
-              help="Timestamp jitter, half-width of a uniform distribution [s].")
+              help="Timestamp jitter, half-width of a uniform distribution [s]; less than half "
+                   "the sample step.")
 @click.option("--seed", default=0, show_default=True, help="Random seed of the sensor effects.")
 @click.option("--force", "force_path", type=click.Path(dir_okay=False), default=None,
               help="External force schedule CSV: t, F_bx, F_by, T_bz (base frame).")
