@@ -7,7 +7,6 @@ import math
 import click
 
 from ropod_sysid.cli.common import (
-    POSITIVE_INT,
     SpanType,
     platform_option,
     quiet_option,
@@ -24,7 +23,7 @@ from ropod_sysid.solve import RCOND
 from ropod_sysid.summary import format_fit
 
 workers_option = click.option(
-    "--workers", type=POSITIVE_INT, default=None, metavar="N",
+    "--workers", type=int, default=None, metavar="N",
     help="Reduce the logs in parallel on a local Dask cluster of N worker processes "
          "(needs: pip install 'ropod-sysid[dask]').")
 dask_option = click.option(

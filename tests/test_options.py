@@ -47,8 +47,7 @@ FIT_CASES = [
                             "m_b=35.1"),
     (["--weight-rotation", "inf"], "--weight-rotation 'inf': the weight must be a finite "
                                    "number > 0"),
-    (["--workers", "0"], "--workers 0: must be a whole number ≥ 1"),
-    (["--workers", "-2"], "--workers -2: must be a whole number ≥ 1"),
+    (["--workers", "-2"], "--workers -2: give a positive number of worker processes"),
 ]
 
 
