@@ -83,18 +83,16 @@ class Number(click.ParamType):
     """A finite number (``integer``: a whole number) in a range, checked at parse time.
 
     ``low``/``high`` are the bounds (None: unbounded), ``low_open``/``high_open`` exclude them;
-    ``unit`` names what the number counts (``"s"``, ``"Hz"``); ``hint(value)`` may return the
-    likely intent of a value out of range ("did you mean …?").
+    ``unit`` names what the number counts (``"s"``, ``"Hz"``).
     """
 
     def __init__(self, low: float | None = None, high: float | None = None, *,
                  low_open: bool = False, high_open: bool = False, integer: bool = False,
-                 unit: str = "", hint: Callable[[float], str | None] | None = None) -> None:
+                 unit: str = "") -> None:
         self.low, self.high = low, high
         self.low_open, self.high_open = low_open, high_open
         self.integer = integer
         self.unit = unit
-        self.hint = hint
         self.name = "integer" if integer else "float"
 
     def range_text(self) -> str:
@@ -125,9 +123,7 @@ class Number(click.ParamType):
         if ok and self.high is not None:
             ok = x < self.high if self.high_open else x <= self.high
         if not ok:
-            hint = self.hint(x) if self.hint is not None else None
-            raise InputError(f"{name} {text}: must be {self.range_text()}"
-                             + (f"; {hint}" if hint else ""))
+            raise InputError(f"{name} {text}: must be {self.range_text()}")
         return int(x) if self.integer else x
 
     def convert(self, value: Any, param: click.Parameter | None,
