@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import functools
+import json
+import math
 import sys
 import warnings
 from collections.abc import Callable
@@ -51,3 +53,117 @@ platform_option = click.option(
     "--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
     help="Platform YAML (geometry, units; see the data contract).",
 )
+
+
+class OptionError(click.ClickException):
+    """A bad option value, found while the options are parsed: ``error: <message>`` on one
+    line, exit status 2, before any work."""
+
+    exit_code = 2
+
+    def __init__(self, message: str) -> None:
+        super().__init__(" ".join(str(message).split()))
+
+    def show(self, file: Any = None) -> None:
+        click.echo(f"error: {self.format_message()}", err=True)
+
+
+def option_name(param: click.Parameter | None, default: str = "value") -> str:
+    """``--name`` of a click parameter (its longest option string)."""
+    if param is None or not getattr(param, "opts", None):
+        return default
+    return max(param.opts, key=len)
+
+
+def _g(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+
+
+class Number(click.ParamType):
+    """A finite number (``integer``: a whole number) in a range, checked at parse time.
+
+    ``low``/``high`` are the bounds (None: unbounded), ``low_open``/``high_open`` exclude them;
+    ``unit`` names what the number counts (``"s"``, ``"Hz"``).
+    """
+
+    def __init__(self, low: float | None = None, high: float | None = None, *,
+                 low_open: bool = False, high_open: bool = False, integer: bool = False,
+                 unit: str = "") -> None:
+        self.low, self.high = low, high
+        self.low_open, self.high_open = low_open, high_open
+        self.integer = integer
+        self.unit = unit
+        self.name = "integer" if integer else "float"
+
+    def range_text(self) -> str:
+        """The allowed values in words, e.g. 'a finite number in (0, 1)', 'a whole number ≥ 1'."""
+        what = "a whole number" if self.integer else "a finite number"
+        unit = f" {self.unit}" if self.unit else ""
+        lo, hi = self.low, self.high
+        if lo is not None and hi is not None:
+            return (f"{what} in {'(' if self.low_open else '['}{_g(lo)}, {_g(hi)}"
+                    f"{')' if self.high_open else ']'}{unit}")
+        if lo is not None:
+            return f"{what} {'>' if self.low_open else '≥'} {_g(lo)}{unit}"
+        if hi is not None:
+            return f"{what} {'<' if self.high_open else '≤'} {_g(hi)}{unit}"
+        return f"{what}{unit}"
+
+    def check(self, value: Any, name: str) -> float | int:
+        """``value`` (text or number) as a checked number; :class:`InputError` otherwise."""
+        text = str(value).strip()
+        try:
+            x = float(text)
+        except ValueError:
+            raise InputError(f"{name} {text!r}: not a number; give {self.range_text()}"
+                             ) from None
+        ok = math.isfinite(x) and (not self.integer or x.is_integer())
+        if ok and self.low is not None:
+            ok = x > self.low if self.low_open else x >= self.low
+        if ok and self.high is not None:
+            ok = x < self.high if self.high_open else x <= self.high
+        if not ok:
+            raise InputError(f"{name} {text}: must be {self.range_text()}")
+        return int(x) if self.integer else x
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        try:
+            return self.check(value, option_name(param))
+        except InputError as exc:
+            raise OptionError(str(exc)) from None
+
+
+def positive(unit: str = "", **kwargs: Any) -> Number:
+    """A finite number > 0."""
+    return Number(0, None, low_open=True, unit=unit, **kwargs)
+
+
+POSITIVE_INT = Number(1, None, integer=True)
+SEED = Number(0, 2**32 - 1, integer=True)
+
+
+class SpanType(click.ParamType):
+    """``--span``: samples (an odd whole number ≥ 5) or seconds (``0.1s``), checked at parse
+    time by :meth:`ropod_sysid.regressor.Span.parse`."""
+
+    name = "span"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        from ropod_sysid.regressor import Span
+
+        if value is None or isinstance(value, Span):
+            return value
+        try:
+            return Span.parse(str(value))
+        except InputError as exc:
+            raise OptionError(str(exc)) from None
+
+
+def json_text(data: Any) -> str:
+    """``data`` as strict JSON (indent 2): NaN and infinities become null, numpy scalars and
+    arrays plain numbers and lists, so that every JSON parser reads it."""
+    from ropod_sysid.io.paramfile import plain_data
+
+    return json.dumps(plain_data(data), indent=2, ensure_ascii=False, allow_nan=False)

@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import (
+    SpanType,
+    platform_option,
+    quiet_option,
+    reports_errors,
+)
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, fit_files
+from ropod_sysid.fit import FitOptions, FitResult, fit_files
+from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import write_parameter_file
 from ropod_sysid.io.timebase import GAP_RULE
 from ropod_sysid.platform import Platform, load_platform
-from ropod_sysid.regressor import Span, usable_pieces
+from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
 from ropod_sysid.solve import RCOND
 from ropod_sysid.summary import format_fit
 
@@ -41,6 +49,9 @@ def parse_fix(items: tuple[str, ...]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError:
             raise InputError(f"--fix {item!r}: use NAME=VALUE, e.g. --fix m_b=35.1") from None
+        if not math.isfinite(out[name.strip()]):
+            raise InputError(f"--fix {item!r}: the value must be a finite number, e.g. "
+                             "--fix m_b=35.1")
     return out
 
 
@@ -52,20 +63,20 @@ def parse_weight(text: str) -> str | float:
     except ValueError:
         raise InputError(f"--weight-rotation {text!r}: use auto, none or a positive number"
                          ) from None
-    if not w > 0:
-        raise InputError(f"--weight-rotation {text!r}: the weight must be positive")
+    if not (math.isfinite(w) and w > 0):
+        raise InputError(f"--weight-rotation {text!r}: the weight must be a finite number > 0")
     return w
 
 
-def parse_delay(text: str) -> str | float:
+def parse_delay(text: str, span: Span | None = None) -> str | float:
+    """auto, or seconds ≥ 0 and (when ``span`` is in seconds) at most one span."""
     if text == "auto":
         return text
     try:
         d = float(text.removesuffix("s"))
     except ValueError:
         raise InputError(f"--input-delay {text!r}: use auto or seconds, e.g. 0.0025") from None
-    if d < 0:
-        raise InputError(f"--input-delay {text!r}: the delay cannot be negative")
+    check_input_delay(d, span.value if span is not None and span.seconds else None)
     return d
 
 
@@ -82,13 +93,14 @@ def parse_row_step(text: str) -> int | None:
     return step
 
 
-def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_rotation: str,
-                physical: bool, input_delay: str, rcond: float,
+def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
+                weight_rotation: str, physical: bool, input_delay: str, rcond: float,
                 row_step: str = "auto", split_gaps: bool = False) -> FitOptions:
+    sp = Span.parse(span)
     return FitOptions(friction=friction,  # type: ignore[arg-type]
-                      span=Span.parse(span), fix=parse_fix(fix),
+                      span=sp, fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
-                      physical=physical, input_delay=parse_delay(input_delay),  # type: ignore
+                      physical=physical, input_delay=parse_delay(input_delay, sp),  # type: ignore
                       rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps)
 
 
@@ -101,6 +113,16 @@ def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span
             for p in usable_pieces(log, span, row_step)]
 
 
+def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
+    """A fit of logs shorter than the motion ``inspect`` calls enough to fit is no result."""
+    seconds = sum(lf.triangles.duration for lf in result.logs)
+    reason = motion_shortfall(seconds, "of log")
+    if reason is not None:
+        names = ", ".join(logs[:3]) + (", …" if len(logs) > 3 else "")
+        raise InputError(f"{names}: {reason} of motion: the values of a shorter fit are noise "
+                         "(ropod-sysid inspect shows what a log lacks)")
+
+
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @platform_option
@@ -110,11 +132,12 @@ def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span
               default="json", show_default=True, help="Parameter file format.")
 @click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
               show_default=True, help="Friction coefficients per wheel and pivot, or shared.")
-@click.option("--span", default=None,
-              help="LOESS span: samples (21) or seconds (0.1s). Default 0.1s.")
+@click.option("--span", type=SpanType(), default=None,
+              help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default 0.1s.")
 @click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
-              help="Form an equation row every N samples; auto: about ten per span (every "
-                   "10th sample at 1 kHz with 0.1s, every sample at 100 Hz). 1 = every sample.")
+              help="Form an equation row every N samples (at most one span); auto: about ten "
+                   "per span (every 10th sample at 1 kHz with 0.1s, every sample at 100 Hz). "
+                   "1 = every sample.")
 @click.option("--fix", multiple=True, metavar="NAME=VALUE",
               help="Hold a parameter fixed (repeatable), e.g. the weighed masses.")
 @click.option("--weight-rotation", default="auto", show_default=True,
@@ -122,7 +145,8 @@ def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span
 @click.option("--physical", is_flag=True,
               help="Physically consistent fit (bounded least squares); RMS cost reported.")
 @click.option("--input-delay", default="0", show_default=True,
-              help="Lag of the motion behind the logged torque: seconds or auto.")
+              help="Lag of the motion behind the logged torque: seconds, from 0 to one "
+                   "span, or auto.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
@@ -137,7 +161,7 @@ def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span
 @quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
-            span: str | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
+            span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
             validate_logs: tuple[str, ...], split_gaps: bool, workers: int | None,
@@ -147,9 +171,9 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     Each log is read and reduced in chunks, so its length is not limited by memory; with
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
-    platform = load_platform(platform_path)
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
                           row_step, split_gaps)
+    platform = load_platform(platform_path)
 
     def say(msg: str) -> None:
         if not quiet:
@@ -157,6 +181,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
 
     result = fit_files(list(logs), platform, options, workers=workers,
                        dask_address=dask_address, quiet=quiet)
+    check_enough(result, logs)
     loaded = None
     if report_path is not None:
         # the report plots every sample: it needs the logs in memory

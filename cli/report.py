@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import SpanType, platform_option, quiet_option, reports_errors
 from ropod_sysid.cli.fit import pieces_of, split_gaps_option
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import fit_settings
@@ -27,13 +27,14 @@ from ropod_sysid.regressor import Span
                    "truth of a simulation).")
 @click.option("--validate", "validate_paths", multiple=True, type=click.Path(dir_okay=False),
               help="Validation log (repeatable): residuals and the disturbance observer.")
-@click.option("--span", default=None,
-              help="LOESS span: samples (21) or seconds (0.1s). Default: the parameter file's.")
+@click.option("--span", type=SpanType(), default=None,
+              help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default: the "
+                   "parameter file's.")
 @split_gaps_option
 @quiet_option
 @reports_errors
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_path: str,
-            compare_path: str | None, validate_paths: tuple[str, ...], span: str | None,
+            compare_path: str | None, validate_paths: tuple[str, ...], span: Span | None,
             split_gaps: bool, quiet: bool) -> None:
     """Write the HTML report of the parameters in --params on LOGS (the fit's logs).
 
@@ -48,11 +49,10 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     compare = read_parameter_file(compare_path) if compare_path is not None else None
-    sp = Span.parse(span) if span is not None else None
     file_span, _, row_step = fit_settings(pfile, params_path)
-    loaded = pieces_of(logs, platform, split_gaps, sp or file_span, row_step)
-    validation = pieces_of(validate_paths, platform, split_gaps, sp or file_span, row_step)
-    result, notes = result_from_parameter_file(platform, loaded, pfile, sp, where=params_path)
+    loaded = pieces_of(logs, platform, split_gaps, span or file_span, row_step)
+    validation = pieces_of(validate_paths, platform, split_gaps, span or file_span, row_step)
+    result, notes = result_from_parameter_file(platform, loaded, pfile, span, where=params_path)
     write_fit_report(result, loaded, out_path, compare=compare,
                      compare_label=Path(compare_path).name if compare_path else None,
                      validation_logs=validation, params_source=params_path, notes=notes)

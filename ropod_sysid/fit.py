@@ -21,10 +21,19 @@ from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import Friction, kind_of
+from ropod_sysid.params import Friction, kind_of, parameter_names
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, preprocess, triangles, usable_pieces
-from ropod_sysid.solve import RCOND, Solution, Triangles, combined_rms, solve, stack_triangles
+from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles, usable_pieces
+from ropod_sysid.solve import (
+    RCOND,
+    Solution,
+    Triangles,
+    check_fixed,
+    check_rcond,
+    combined_rms,
+    solve,
+    stack_triangles,
+)
 
 WeightRotation = Literal["auto", "none"] | float
 
@@ -43,6 +52,20 @@ class FitOptions:
     max_delay: float = 0.05
     row_step: int | None = None  # samples between equation rows; None: ~10 per span
     split_gaps: bool = False  # fit the pieces between gaps in time as separate logs
+
+    def __post_init__(self) -> None:
+        """Nonsense values are a one-line :class:`InputError` before any work."""
+        check_rcond(self.rcond)
+        if self.input_delay != "auto":
+            check_input_delay(float(self.input_delay),
+                              self.span.value if self.span.seconds else None)
+        if not (math.isfinite(self.max_delay) and self.max_delay > 0):
+            raise InputError(f"max_delay {self.max_delay:g}: must be a finite number of "
+                             "seconds > 0")
+        w = self.weight_rotation
+        if w not in ("auto", "none") and not (isinstance(w, int | float)
+                                               and math.isfinite(w) and w > 0):
+            raise InputError(f"--weight-rotation {w!r}: use auto, none or a finite number > 0")
 
 
 @dataclass
@@ -159,6 +182,44 @@ def fit_settings(pfile: ParameterFile, where: str) -> tuple[Span, float, int | N
     return _span_of(pfile, where), _delay_of(pfile, where), _row_step_of(pfile, where)
 
 
+def parameters_of(pfile: ParameterFile, platform: Platform, where: str,
+                  ) -> tuple[Friction, dict[str, float]]:
+    """The friction model and name → value of a fit's parameter file, for ``platform``.
+
+    Refused with a one-line :class:`InputError` naming ``where``: a file of another platform,
+    a ``friction`` other than per-wheel or shared, names that are no parameters of that model
+    and these units, values that are null, NaN or infinite, and parameters of the model that
+    are missing (a unit's friction left out would silently be 0).
+    """
+    if pfile.platform != platform.name:
+        raise InputError(f"{where}: the parameter file is for platform '{pfile.platform}', the "
+                         f"platform file describes '{platform.name}'; give the matching files")
+    values = pfile.values()
+    declared = pfile.extras.get("friction")
+    if declared is not None and declared not in ("per-wheel", "shared"):
+        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
+    friction: Friction = declared or (  # type: ignore[assignment]
+        "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel")
+    units = platform.unit_names
+    names = parameter_names(units, friction)
+    unknown = [k for k in values if k not in names]
+    if unknown:
+        raise InputError(
+            f"{where}: parameter(s) {', '.join(unknown[:6])} are not parameters of the "
+            f"{friction} friction model of units {', '.join(units)}; is this the parameter file "
+            "of this platform?")
+    bad = [k for k, v in values.items() if not math.isfinite(v)]
+    if bad:
+        raise InputError(f"{where}: parameter '{bad[0]}' is null, NaN or infinite; a parameter "
+                         "file gives a finite value for every parameter")
+    missing = [k for k in names if k not in values]
+    if missing:
+        raise InputError(f"{where}: parameter(s) {', '.join(missing[:6])}"
+                         f"{' …' if len(missing) > 6 else ''} missing; the {friction} friction "
+                         f"model of units {', '.join(units)} needs all of {len(names)}")
+    return friction, values
+
+
 def physical_bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of a physically consistent fit: masses and inertias ≥ 0; friction dissipative
     (roll friction ≤ 0 since it is added to the wheel torque, pivot friction ≥ 0; see params)."""
@@ -270,6 +331,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay."""
     model = PlatformModel(platform)
     names = model.parameter_names(options.friction)
+    check_fixed(options.fix, names)  # before the logs are read
     delay = 0.0
     if options.input_delay == "auto":
         def cost(d: float) -> float:
@@ -278,12 +340,18 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
 
         from scipy.optimize import minimize_scalar  # imported here: only the delay search
 
-        res = minimize_scalar(cost, bounds=(0.0, options.max_delay),
+        top = min(options.max_delay, options.span.value) if options.span.seconds \
+            else options.max_delay  # at most one span (check_input_delay)
+        res = minimize_scalar(cost, bounds=(0.0, top),
                                              method="bounded", options={"xatol": 2e-4})
         delay = float(res.x)
     else:
         delay = float(options.input_delay)
     reduced = reduce(delay)
+    for source, tri, _ in reduced:
+        if tri.torque_free():
+            raise InputError(f"{source}: the motor currents are all zero, so there is no torque "
+                             "to fit the parameters to; check the log's current columns")
     systems = [tri for _, tri, _ in reduced]
     solution, weights = fit_systems(systems, names, options)
     per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri)

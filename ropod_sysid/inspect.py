@@ -113,8 +113,9 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         coverage[u] = 10.0 * float(bins.size)
 
     reasons = []
-    if moving_time < c.min_moving:
-        reasons.append(f"only {moving_time:.1f} s of motion; record at least {c.min_moving:g} s")
+    short = motion_shortfall(moving_time, "of motion", c)
+    if short is not None:
+        reasons.append(short)
     for key, need, unit in (("vx", c.min_vx, "m/s"), ("vy", c.min_vy, "m/s"),
                             ("omega", c.min_omega, "rad/s")):
         lo, hi = vel_ranges[key]
@@ -149,6 +150,17 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         velocity_ranges=vel_ranges, moving_time=moving_time, pivot_coverage=coverage,
         enough_to_fit=not reasons, reasons=reasons, warnings=notes_w,
     )
+
+
+def motion_shortfall(seconds: float, what: str = "of motion",
+                     criteria: Criteria | None = None) -> str | None:
+    """The verdict's first rule: why ``seconds`` (of motion, or ``what``) are too few to fit,
+    or None when they are enough (:attr:`Criteria.min_moving`). A fit checks its logs'
+    length with it: a log shorter than that cannot hold enough motion."""
+    c = criteria or Criteria()
+    if seconds < c.min_moving:
+        return f"only {seconds:.1f} s {what}; record at least {c.min_moving:g} s"
+    return None
 
 
 def _base_velocity(log: Log, platform: Platform, t: np.ndarray, dt_med: float,

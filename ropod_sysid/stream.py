@@ -69,6 +69,7 @@ from ropod_sysid.regressor import (
     Span,
     TooShort,
     block_triangles,
+    check_input_delay,
     check_length,
     check_piece_samples,
     grid_step,
@@ -458,6 +459,7 @@ class _Blocks:
     def start(self, dt: float) -> None:
         self.dt = dt
         self.k = self.span.samples(dt, 0)
+        check_input_delay(self.delay, self.k * dt)
         self.c = (self.k - 1) // 2
         self.grid = RowGrid.for_span(self.k, self.row_step)
         self.halo = self.grid.halo
@@ -488,6 +490,7 @@ class _Blocks:
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
         self.tri.samples = n - 2 * self.trim
+        self.tri.duration = (n - 1) * self.dt
         self.tri.correlation = self.grid.correlation
         return self.tri, self.obs, n
 
@@ -727,7 +730,7 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
-    RowGrid.for_span(3, row_step)  # a bad row step fails before the file is opened
+    RowGrid.check_step(row_step)  # a bad row step fails before the file is opened
     done: list[StreamResult | None] = []
     dropped: list[str] = []
     resample = False

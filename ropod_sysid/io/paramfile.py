@@ -490,6 +490,12 @@ def _finite_or_none(value: Any) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def plain_data(value: Any) -> Any:
+    """Plain, strict-JSON-ready data: numpy scalars/arrays, tuples → float/int/list, paths →
+    text, NaN and infinities → None."""
+    return _plain(value)
+
+
 def _plain(value: Any, keep_nonfinite: bool = False) -> Any:
     """Plain Python data (numpy scalars/arrays, tuples → float/int/list); non-finite → None."""
     if isinstance(value, np.ndarray):

@@ -36,6 +36,7 @@ from ropod_sysid.fit import (
     fit_settings,
     fit_systems,
     mean_correlation,
+    parameters_of,
 )
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
@@ -43,10 +44,8 @@ from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_tr
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
-    INERTIAL,
     UNITS_OF,
     DynamicParameters,
-    Friction,
     kind_of,
     parameter_names,
 )
@@ -77,37 +76,15 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     of these logs is computed for that, but its values are not shown). The friction model,
     span (unless ``span`` is given), input delay and fixed parameters come from the file.
 
-    Returns the result and notes for the reader (e.g. friction coefficients missing in the file).
+    The file is checked first (:func:`ropod_sysid.fit.parameters_of`). Returns the result and
+    notes for the reader (e.g. that the values are those of a bounded fit).
     """
     if not logs:
         raise InputError("no logs given; pass one or more log files")
-    units = platform.unit_names
-    values = pfile.values()
     stds = pfile.stds()
     notes: list[str] = []
-    friction = _friction_of(pfile, values, where)
-    names = parameter_names(units, friction)
-    unknown = [k for k in values if k not in names]
-    if unknown:
-        raise InputError(
-            f"{where}: parameter(s) {', '.join(unknown[:6])} are not parameters of the "
-            f"{friction} friction model of units {', '.join(units)}; is this the parameter file "
-            "of this platform?")
-    for k in INERTIAL:
-        if k not in values:
-            raise InputError(f"{where}: parameter '{k}' is missing; a parameter file gives all "
-                             f"of {', '.join(INERTIAL)}")
-    bad = [k for k, v in values.items() if not math.isfinite(v)]
-    if bad:
-        raise InputError(f"{where}: parameter '{bad[0]}' has no finite value")
-    missing = [k for k in names if k not in values]
-    if missing:
-        notes.append(f"{len(missing)} friction coefficient(s) missing in the parameter file "
-                     f"({', '.join(missing[:4])}{'…' if len(missing) > 4 else ''}) are taken "
-                     "as 0")
-    if pfile.platform != platform.name:
-        notes.append(f"the parameter file is for platform '{pfile.platform}', the platform "
-                     f"file describes '{platform.name}'")
+    friction, values = parameters_of(pfile, platform, where)
+    names = parameter_names(platform.unit_names, friction)
     file_span, delay, row_step = fit_settings(pfile, where)
     span = span if span is not None else file_span
     fixed = {k: values[k] for k in names
@@ -155,15 +132,6 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
                      f"{file_rms[1]:.4g} N m on the logs it was fitted to; on these logs it is "
                      f"{here[0]:.4g} N / {here[1]:.4g} N m")
     return result, notes
-
-
-def _friction_of(pfile: ParameterFile, values: dict[str, float], where: str) -> Friction:
-    declared = pfile.extras.get("friction")
-    if declared in ("per-wheel", "shared"):
-        return declared  # type: ignore[return-value]
-    if declared is not None:
-        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
-    return "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel"
 
 
 # ---------------------------------------------------------------------------------------------
