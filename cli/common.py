@@ -21,7 +21,7 @@ def fail(message: str) -> None:
     sys.exit(2)
 
 
-def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
                       lineno: int, line: str | None = None) -> str:
     """Warnings (e.g. a damaged MCAP file read up to the damage) as one line on stderr."""
     return f"warning: {' '.join(str(message).split())}\n"
@@ -32,7 +32,7 @@ def reports_errors(func: F) -> F:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        warnings.formatwarning = _one_line_warning  # type: ignore[assignment]
+        warnings.formatwarning = one_line_warning  # type: ignore[assignment]
         try:
             return func(*args, **kwargs)
         except InputError as exc:

@@ -8,11 +8,13 @@ from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files
 from ropod_sysid.io import read_log
+from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.io.paramfile import write_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
 from ropod_sysid.solve import RCOND
-from ropod_sysid.summary import format_fit
+from ropod_sysid.stream import validate_sources
+from ropod_sysid.summary import format_fit, format_validation
 
 workers_option = click.option(
     "--workers", type=int, default=None, metavar="N",
@@ -111,9 +113,11 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the HTML fit report here.")
 @click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
-              help="With --report: a parameter file shown side by side.")
+              help="A parameter file (or flat truth mapping) shown side by side: in the "
+                   "report, or without --report beside the printed parameter table.")
 @click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
-              help="With --report: validation log (repeatable).")
+              help="Validation log (repeatable): in the report, or without --report the "
+                   "printed validation summary (as 'ropod-sysid validate').")
 @workers_option
 @dask_option
 @quiet_option
@@ -129,27 +133,40 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     Each log is read and reduced in chunks, so its length is not limited by memory; with
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
-    platform = load_platform(platform_path)
-    options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                          row_step)
+    inputs = [("LOGS", p) for p in logs] + [("--platform", platform_path),
+                                             ("--compare", compare_path)]
+    with OutputSet([("--out", out_path), ("--report", report_path)],
+                   inputs + [("--validate", p) for p in validate_logs]):
+        platform = load_platform(platform_path)
+        options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
+                              row_step)
+        compare, compare_label = None, None
+        if compare_path is not None or report_path is not None:
+            # the report module (and matplotlib) only when needed: keeps a plain fit quick
+            from ropod_sysid.report import read_comparison, write_fit_report
 
-    def say(msg: str) -> None:
-        if not quiet:
-            click.echo(msg, err=True)
-
-    result = fit_files(list(logs), platform, options, workers=workers,
-                       dask_address=dask_address, quiet=quiet)
-    loaded = None
-    if report_path is not None:
-        # the report plots every sample: it needs the logs in memory
-        loaded = [read_log(p, platform) for p in logs]
-    write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
-    if report_path is not None:
-        from ropod_sysid.report import write_fit_report
-
-        write_fit_report(result, loaded, report_path, compare=compare_path,
-                         validation_logs=[read_log(p, platform) for p in validate_logs])
-        say(f"wrote {report_path}")
+            compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
+        result = fit_files(list(logs), platform, options, workers=workers,
+                           dask_address=dask_address, quiet=quiet)
+        write_parameter_file(result.parameter_file(), out_path, fmt,  # type: ignore[arg-type]
+                             platform)
+        validation = None
+        if report_path is not None:
+            # the report plots every sample: it needs the logs in memory
+            write_fit_report(result, [read_log(p, platform) for p in logs], report_path,
+                             compare=compare, compare_label=compare_label,
+                             validation_logs=[read_log(p, platform) for p in validate_logs])
+        elif validate_logs:
+            validation = validate_sources(list(validate_logs), platform,
+                                          result.fitted_parameters(), options.span,
+                                          result.input_delay, workers=workers,
+                                          dask_address=dask_address,
+                                          row_step=options.row_step, quiet=quiet)
     if not quiet:
-        click.echo(format_fit(result))
-    say(f"wrote {out_path}")
+        if report_path is not None:
+            click.echo(f"wrote {report_path}", err=True)
+        click.echo(format_fit(result, None if report_path else compare, compare_label))
+    if validation is not None:
+        click.echo(format_validation(validation))
+    if not quiet:
+        click.echo(f"wrote {out_path}", err=True)

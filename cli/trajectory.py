@@ -12,6 +12,7 @@ import click
 
 from ropod_sysid.cli.common import quiet_option, reports_errors
 from ropod_sysid.errors import InputError
+from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.platform import Platform, load_platform
 
 OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
@@ -65,25 +66,18 @@ def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]
         raise InputError(f"--floor: {exc}") from None
 
 
-def _out_dir(out: str) -> Path:
-    path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory; give a directory")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the directory ({exc.strerror or exc})"
-                         ) from None
-    return path
+def _variant_files(out: str) -> list[tuple[str, Path]]:
+    """The four files a run is written to, as outputs of --out."""
+    return [("--out", Path(out) / name) for name in OUT_FILES.values()]
 
 
 def _write_variants(traj: Any, out: str) -> list[Path]:
+    """Write the run and its variants into ``out`` (inside the command's OutputSet)."""
     from ropod_sysid.trajectory import variants
 
-    folder = _out_dir(out)
     written = []
     for name, vt in variants(traj).items():
-        target = folder / OUT_FILES[name]
+        target = Path(out) / OUT_FILES[name]
         try:
             vt.write_csv(target)
         except OSError as exc:
@@ -137,9 +131,11 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
         raise InputError(f"--duration {duration:g}: must be a positive number of seconds")
     if not (0 < dt <= 0.1):
         raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
-    traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
-                   _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
-    written = _write_variants(traj, out)
+    with OutputSet(_variant_files(out), [("--platform", platform_path)],
+                   folders=[("--out", out)]):
+        traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
+                       _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
+        written = _write_variants(traj, out)
     if not quiet:
         click.echo(f"typical run: {traj.duration:g} s, {traj.n_samples} setpoints; wrote "
                    + ", ".join(str(p) for p in written))
@@ -172,11 +168,12 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
     if not (0 < dt <= 0.1):
         raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
-    platform = load_platform(platform_path)
-    _out_dir(out)
-    result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
-                      _floor(floor), progress=not quiet, dt=dt)
-    written = _write_variants(result.trajectory, out)
+    with OutputSet(_variant_files(out), [("--platform", platform_path)],
+                   folders=[("--out", out)]):
+        platform = load_platform(platform_path)
+        result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
+                          _floor(floor), progress=not quiet, dt=dt)
+        written = _write_variants(result.trajectory, out)
     if not quiet:
         click.echo(f"optimised run: {result.trajectory.duration:g} s, condition number "
                    f"{result.condition_number:.4g} (rank {result.rank}, identifiable "
@@ -219,17 +216,19 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
         raise InputError(f"--log-rate {log_rate:g}: must be a positive number")
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
-    platform = load_platform(platform_path)
-    traj = read_trajectory_csv(traj_path)
-    params = None
-    if params_path is not None:
-        from ropod_sysid.io.paramfile import read_truth_parameters
+    inputs = [("TRAJ.csv", traj_path), ("--platform", platform_path), ("--params", params_path)]
+    with OutputSet([("--plot", plot_path)], inputs):
+        platform = load_platform(platform_path)
+        traj = read_trajectory_csv(traj_path)
+        params = None
+        if params_path is not None:
+            from ropod_sysid.io.paramfile import read_truth_parameters
 
-        params = read_truth_parameters(params_path, platform.unit_names)
-    fl = _floor(floor)
-    report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
-    if plot_path is not None:
-        plot(traj, plot_path, fl, limits, platform)
+            params = read_truth_parameters(params_path, platform.unit_names)
+        fl = _floor(floor)
+        report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
+        if plot_path is not None:
+            plot(traj, plot_path, fl, limits, platform)
     if as_json:
         click.echo(json.dumps(report.to_dict(), indent=2, ensure_ascii=False))
     else:

@@ -20,7 +20,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import Friction, kind_of
+from ropod_sysid.params import DynamicParameters, Friction, kind_of
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span, preprocess, triangles
 from ropod_sysid.solve import RCOND, Solution, Triangles, combined_rms, solve, stack_triangles
@@ -79,6 +79,13 @@ class FitResult:
     def values(self) -> dict[str, float]:
         sol = self.physical or self.solution
         return dict(zip(sol.names, map(float, sol.values), strict=True))
+
+    def fitted_parameters(self) -> DynamicParameters:
+        """The values the fit reports (the physically consistent ones if made) as a model's
+        parameters, e.g. to validate them on other logs."""
+        shown = self.physical.values if self.physical is not None else self.solution.values
+        return DynamicParameters.from_vector(shown, self.platform.unit_names,
+                                             self.options.friction)
 
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (data contract), with the fit's account in extras."""
