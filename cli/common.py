@@ -10,7 +10,7 @@ from typing import Any, TypeVar
 
 import click
 
-from ropod_sysid.errors import InputError
+from ropod_sysid.errors import InputError, one_line_warning
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -19,12 +19,6 @@ def fail(message: str) -> None:
     """Print ``error: message`` on one line to stderr and exit with status 2."""
     click.echo(f"error: {' '.join(str(message).split())}", err=True)
     sys.exit(2)
-
-
-def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
-                      lineno: int, line: str | None = None) -> str:
-    """Warnings (e.g. a damaged MCAP file read up to the damage) as one line on stderr."""
-    return f"warning: {' '.join(str(message).split())}\n"
 
 
 def reports_errors(func: F) -> F:

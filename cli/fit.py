@@ -167,6 +167,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
             click.echo(f"wrote {report_path}", err=True)
         click.echo(format_fit(result, None if report_path else compare, compare_label))
     if validation is not None:
+        click.echo("validation of the fitted values on the --validate logs:")
         click.echo(format_validation(validation))
     if not quiet:
         click.echo(f"wrote {out_path}", err=True)

@@ -9,7 +9,7 @@ from typing import Any
 import click
 
 from ropod_sysid import __version__
-from ropod_sysid.cli.common import one_line_warning
+from ropod_sysid.errors import one_line_warning
 
 # command name → module in this package that defines ``command``
 COMMANDS = {

@@ -51,7 +51,7 @@ def write_target(path: PathLike, label: str | None = None) -> Path:
     target = Path(os.path.realpath(path))
     try:
         mode = os.stat(target).st_mode
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):  # a new file (its folder is checked apart)
         return target
     except OSError as exc:
         raise InputError(f"{_name(label, path)}: cannot use it as an output "
