@@ -9,6 +9,7 @@ from collections.abc import Callable
 from typing import Any, TypeVar
 
 import click
+from click.core import ParameterSource
 
 from ropod_sysid.errors import InputError, one_line_warning
 
@@ -38,6 +39,12 @@ def reports_errors(func: F) -> F:
             sys.exit(130)
 
     return wrapper  # type: ignore[return-value]
+
+
+def given(name: str) -> bool:
+    """Whether the user gave option ``name`` (the parameter's name) rather than its default."""
+    ctx = click.get_current_context()
+    return ctx.get_parameter_source(name) not in (None, ParameterSource.DEFAULT)
 
 
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import given, platform_option, quiet_option, reports_errors
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, write_log
 from ropod_sysid.io.atomic import OutputSet
@@ -58,6 +58,9 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
         raise InputError(f"--dt {dt}: the integration step must be in (0, 0.001] s")
     if rate <= 0:
         raise InputError(f"--rate {rate}: must be positive")
+    if given("seed") and not (current_noise > 0 or jitter > 0):
+        raise InputError(f"--seed {seed}: seeds the current noise and timestamp jitter, and "
+                         "neither is on; give --current-noise or --jitter, or leave out --seed")
     inputs = [("--platform", platform_path), ("--params", params_path),
               ("--trajectory", traj_path), ("--force", force_path)]
     with OutputSet([("--out", out_path)], inputs):

@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from ropod_sysid.cli.common import quiet_option, reports_errors
+from ropod_sysid.cli.common import given, quiet_option, reports_errors
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.platform import Platform, load_platform
@@ -48,6 +48,9 @@ def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
             pivot_rate_max: float, no_pivot_limit: bool) -> Any:
     from ropod_sysid.trajectory import Limits
 
+    if no_pivot_limit and given("pivot_rate_max"):
+        raise InputError(f"--pivot-rate-max {pivot_rate_max:g} and --no-pivot-limit: give one "
+                         "of them")
     for name, value in (("--v-max", v_max), ("--a-max", a_max), ("--w-max", w_max),
                         ("--alpha-max", alpha_max), ("--pivot-rate-max", pivot_rate_max)):
         if not (math.isfinite(value) and value > 0):

@@ -367,3 +367,17 @@ def test_a_numpy_warning_is_one_line(files, tmp_path):
                        text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert p.stderr == "warning: divide by zero encountered in log\n"
+
+
+def test_options_that_would_do_nothing_are_errors(work):
+    d = work
+    r = run("simulate", "--platform", d / "platform.yaml", "--params", d / "truth.json",
+            "--trajectory", d / "traj.csv", "--out", d / "s.csv", "--seed", "3")
+    one_line_error(r, "--seed 3: seeds the current noise and timestamp jitter, and neither is "
+                      "on; give --current-noise or --jitter, or leave out --seed")
+    r = run("trajectory", "typical", "--out", d / "runs", "--no-pivot-limit",
+            "--pivot-rate-max", "2")
+    one_line_error(r, "--pivot-rate-max 2 and --no-pivot-limit: give one of them")
+    r = run("trajectory", "check", d / "traj.csv", "--platform", d / "platform.yaml",
+            "--no-pivot-limit", "--pivot-rate-max", "2")
+    one_line_error(r, "--pivot-rate-max 2 and --no-pivot-limit: give one of them")
