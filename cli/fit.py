@@ -162,10 +162,12 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
                                           result.input_delay, workers=workers,
                                           dask_address=dask_address,
                                           row_step=options.row_step, quiet=quiet)
-    if not quiet:
-        if report_path is not None:
+    if report_path is not None:
+        compare = None  # shown in the report
+        if not quiet:
             click.echo(f"wrote {report_path}", err=True)
-        click.echo(format_fit(result, None if report_path else compare, compare_label))
+    if not quiet or compare is not None:  # --compare without --report: the table is its output
+        click.echo(format_fit(result, compare, compare_label))
     if validation is not None:
         click.echo("validation of the fitted values on the --validate logs:")
         click.echo(format_validation(validation))

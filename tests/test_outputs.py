@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from ropod_sysid.cli.main import main
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import write_log
-from ropod_sysid.io.atomic import OutputSet, atomic_write_text, check_outputs
+from ropod_sysid.io.atomic import OutputSet, atomic_path, atomic_write_text, check_outputs
 from ropod_sysid.platform import save_platform
 from tests.test_cli import one_line_error
 
@@ -322,6 +322,9 @@ def test_compare_without_report_prints_the_comparison(files, truth, off_square):
     assert f" {100 * diff / abs(true['fpv_1']):+.1f}% " in row
     assert f" {diff / std:+.2f} " in row
     assert not list(d.glob("*.html"))
+    q = run("fit", d / "run0.csv", "--platform", d / "platform.yaml", "--out",
+            d / "cmp.json", "--compare", d / "truth.json", "--quiet")
+    assert q.exit_code == 0 and row in q.output.splitlines()  # its output, even with --quiet
 
 
 def test_validate_without_report_prints_what_validate_prints(files):
@@ -381,3 +384,11 @@ def test_options_that_would_do_nothing_are_errors(work):
     r = run("trajectory", "check", d / "traj.csv", "--platform", d / "platform.yaml",
             "--no-pivot-limit", "--pivot-rate-max", "2")
     one_line_error(r, "--pivot-rate-max 2 and --no-pivot-limit: give one of them")
+
+
+def test_a_full_disk_is_one_line_and_leaves_no_file(tmp_path):
+    full = r"out.csv: cannot write \(No space left on device\)$"
+    with pytest.raises(InputError, match=full), atomic_path(tmp_path / "out.csv") as tmp:
+        tmp.write_text("part")
+        raise OSError(28, "No space left on device")
+    assert list(tmp_path.iterdir()) == []

@@ -83,8 +83,11 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     Inside an :class:`OutputSet` block the rename waits for the end of the block.
     """
     target = write_target(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write ({exc.strerror or exc})") from None
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -94,6 +97,9 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
             outputs._staged.append((tmp_path, target))
         else:
             _publish(tmp_path, target)
+    except OSError as exc:  # e.g. the disk is full
+        tmp_path.unlink(missing_ok=True)
+        raise InputError(f"{path}: cannot write ({exc.strerror or exc})") from None
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
