@@ -7,10 +7,9 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, read_log
-from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.io.mcaplog import write_mcap_log
 from ropod_sysid.io.smartwheel import write_smartwheel
@@ -29,6 +28,7 @@ from ropod_sysid.platform import load_platform
                    "(sens_ROPOD_SmartWheel_t) layout using the platform's per-unit settings.")
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "OUT"}, inputs={"in_path": "IN", "platform_path": "--platform"})
 def command(in_path: str, out_path: str, platform_path: str, encoding: str | None, layout: str,
             quiet: bool) -> None:
     """Convert log IN to OUT (.csv or .mcap); the input layout is recognised by itself.
@@ -40,18 +40,17 @@ def command(in_path: str, out_path: str, platform_path: str, encoding: str | Non
         raise InputError(f"{out_path}: unknown log format '{suffix}'; use .csv or .mcap")
     if encoding is not None and suffix != ".mcap":
         raise InputError(f"--encoding {encoding}: applies to .mcap output only, not {out_path}")
-    with OutputSet([("OUT", out_path)], [("IN", in_path), ("--platform", platform_path)]):
-        platform = load_platform(platform_path)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")       # the same text is in log.notes
-            log = read_log(in_path, platform)
-        enc = encoding or "json"
-        if layout == "smartwheel":
-            write_smartwheel(log, out_path, platform, encoding=enc)
-        elif suffix == ".csv":
-            write_csv_log(log, out_path)
-        else:
-            write_mcap_log(log, out_path, encoding=enc)
+    platform = load_platform(platform_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")       # the same text is in log.notes
+        log = read_log(in_path, platform)
+    enc = encoding or "json"
+    if layout == "smartwheel":
+        write_smartwheel(log, out_path, platform, encoding=enc)
+    elif suffix == ".csv":
+        write_csv_log(log, out_path)
+    else:
+        write_mcap_log(log, out_path, encoding=enc)
     for note in log.notes:
         click.echo(f"warning: {' '.join(note.split())}", err=True)
     if not quiet:

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files
 from ropod_sysid.io import read_log
-from ropod_sysid.io.atomic import OutputSet
-from ropod_sysid.io.paramfile import write_parameter_file
+from ropod_sysid.io.paramfile import ParameterFile, write_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
 from ropod_sysid.solve import RCOND
@@ -122,6 +121,9 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
 @dask_option
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out", "report_path": "--report"},
+        inputs={"logs": "LOGS", "platform_path": "--platform", "compare_path": "--compare",
+                "validate_logs": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
             span: str | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool,
@@ -133,43 +135,42 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     Each log is read and reduced in chunks, so its length is not limited by memory; with
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
-    inputs = [("LOGS", p) for p in logs] + [("--platform", platform_path),
-                                             ("--compare", compare_path)]
-    with OutputSet([("--out", out_path), ("--report", report_path)],
-                   inputs + [("--validate", p) for p in validate_logs]):
-        platform = load_platform(platform_path)
-        options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                              row_step)
-        compare, compare_label = None, None
-        if compare_path is not None or report_path is not None:
-            # the report module (and matplotlib) only when needed: keeps a plain fit quick
-            from ropod_sysid.report import read_comparison, write_fit_report
+    platform = load_platform(platform_path)
+    options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
+                          row_step)
 
-            compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
-        result = fit_files(list(logs), platform, options, workers=workers,
-                           dask_address=dask_address, quiet=quiet)
-        write_parameter_file(result.parameter_file(), out_path, fmt,  # type: ignore[arg-type]
-                             platform)
-        validation = None
-        if report_path is not None:
-            # the report plots every sample: it needs the logs in memory
-            write_fit_report(result, [read_log(p, platform) for p in logs], report_path,
-                             compare=compare, compare_label=compare_label,
-                             validation_logs=[read_log(p, platform) for p in validate_logs])
-        elif validate_logs:
-            validation = validate_sources(list(validate_logs), platform,
-                                          result.fitted_parameters(), options.span,
-                                          result.input_delay, workers=workers,
-                                          dask_address=dask_address,
-                                          row_step=options.row_step, quiet=quiet)
-    if report_path is not None:
-        compare = None  # shown in the report
+    def say(msg: str) -> None:
         if not quiet:
-            click.echo(f"wrote {report_path}", err=True)
+            click.echo(msg, err=True)
+
+    compare: ParameterFile | None = None
+    compare_label: str | None = None
+    if compare_path is not None or report_path is not None:
+        # the report module (and matplotlib) only when needed: keeps a plain fit quick
+        from ropod_sysid.report import read_comparison, write_fit_report
+
+        compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
+    result = fit_files(list(logs), platform, options, workers=workers,
+                       dask_address=dask_address, quiet=quiet)
+    loaded = None
+    if report_path is not None:
+        # the report plots every sample: it needs the logs in memory
+        loaded = [read_log(p, platform) for p in logs]
+    write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
+    validation = None
+    if validate_logs and report_path is None:
+        validation = validate_sources(list(validate_logs), platform, result.fitted_parameters(),
+                                      options.span, result.input_delay, workers=workers,
+                                      dask_address=dask_address, row_step=options.row_step,
+                                      quiet=quiet)
+    if report_path is not None:
+        write_fit_report(result, loaded, report_path, compare=compare, compare_label=compare_label,
+                         validation_logs=[read_log(p, platform) for p in validate_logs])
+        say(f"wrote {report_path}")
+        compare = None  # shown in the report
     if not quiet or compare is not None:  # --compare without --report: the table is its output
         click.echo(format_fit(result, compare, compare_label))
     if validation is not None:
         click.echo("validation of the fitted values on the --validate logs:")
         click.echo(format_validation(validation))
-    if not quiet:
-        click.echo(f"wrote {out_path}", err=True)
+    say(f"wrote {out_path}")

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.io import read_log
-from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
@@ -19,7 +18,7 @@ from ropod_sysid.regressor import Span
 @platform_option
 @click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
               help="Parameter file of a fit (json, yaml or ros2).")
-@click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--out", "out_path", required=True, type=click.Path(),
               help="HTML report to write (one self-contained file).")
 @click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
               help="Another parameter file shown side by side (e.g. a fixed-masses fit or the "
@@ -30,6 +29,9 @@ from ropod_sysid.regressor import Span
               help="LOESS span: samples (21) or seconds (0.1s). Default: the parameter file's.")
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out"},
+        inputs={"logs": "LOGS", "platform_path": "--platform", "params_path": "--params",
+                "compare_path": "--compare", "validate_paths": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_path: str,
             compare_path: str | None, validate_paths: tuple[str, ...], span: str | None,
             quiet: bool) -> None:
@@ -40,20 +42,15 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     """
     from ropod_sysid.report import result_from_parameter_file, write_fit_report
 
-    inputs = [("LOGS", p) for p in logs] + [("--platform", platform_path),
-                                             ("--params", params_path),
-                                             ("--compare", compare_path)]
-    with OutputSet([("--out", out_path)], inputs + [("--validate", p) for p in validate_paths]):
-        platform = load_platform(platform_path)
-        pfile = read_parameter_file(params_path)
-        compare = read_parameter_file(compare_path) if compare_path is not None else None
-        sp = Span.parse(span) if span is not None else None
-        loaded = [read_log(p, platform) for p in logs]
-        validation = [read_log(p, platform) for p in validate_paths]
-        result, notes = result_from_parameter_file(platform, loaded, pfile, sp,
-                                                   where=params_path)
-        write_fit_report(result, loaded, out_path, compare=compare,
-                         compare_label=Path(compare_path).name if compare_path else None,
-                         validation_logs=validation, params_source=params_path, notes=notes)
+    platform = load_platform(platform_path)
+    pfile = read_parameter_file(params_path)
+    compare = read_parameter_file(compare_path) if compare_path is not None else None
+    sp = Span.parse(span) if span is not None else None
+    loaded = [read_log(p, platform) for p in logs]
+    validation = [read_log(p, platform) for p in validate_paths]
+    result, notes = result_from_parameter_file(platform, loaded, pfile, sp, where=params_path)
+    write_fit_report(result, loaded, out_path, compare=compare,
+                     compare_label=Path(compare_path).name if compare_path else None,
+                     validation_logs=validation, params_source=params_path, notes=notes)
     if not quiet:
         click.echo(f"wrote {out_path}", err=True)

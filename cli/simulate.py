@@ -5,10 +5,9 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from ropod_sysid.cli.common import given, platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import given, platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, write_log
-from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.io.csvlog import read_numeric_table
 from ropod_sysid.io.paramfile import read_truth_parameters
 from ropod_sysid.params import DynamicParameters
@@ -47,6 +46,9 @@ from ropod_sysid.trajectory import read_trajectory_csv
               show_default=True, help="auto: units trail the first motion; zero: all along x.")
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out"},
+        inputs={"platform_path": "--platform", "params_path": "--params",
+                "traj_path": "--trajectory", "force_path": "--force"})
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
             dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
             seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
@@ -61,30 +63,26 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     if given("seed") and not (current_noise > 0 or jitter > 0):
         raise InputError(f"--seed {seed}: seeds the current noise and timestamp jitter, and "
                          "neither is on; give --current-noise or --jitter, or leave out --seed")
-    inputs = [("--platform", platform_path), ("--params", params_path),
-              ("--trajectory", traj_path), ("--force", force_path)]
-    with OutputSet([("--out", out_path)], inputs):
-        platform = load_platform(platform_path)
-        values = read_truth_parameters(params_path, platform.unit_names)
-        params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
-        setpoints = read_trajectory_csv(traj_path).to_setpoints()
-        force = None
-        if force_path is not None:
-            fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])
-            force = ForceSchedule(fc["t"],
-                                  np.column_stack([fc["F_bx"], fc["F_by"], fc["T_bz"]]))
-        sensors = Sensors(encoder_counts, current_noise, jitter, seed)
-        try:
-            (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt,
-                                 controller=Controller(kp, ki, torque_limit), sensors=sensors,
-                                 force=force, initial_delta=initial_pivots if initial_pivots ==
-                                 "auto" else None, quiet=quiet, source=out_path)
-        except ValueError as exc:
-            raise InputError(f"--rate {rate} / --dt {dt}: {exc}") from None
-        if not np.all(np.isfinite(result.q)):
-            raise InputError(f"{traj_path}: the simulation diverged; lower the setpoints or "
-                             "raise --torque-limit")
-        write_log(result.log, out_path, platform)
+    platform = load_platform(platform_path)
+    values = read_truth_parameters(params_path, platform.unit_names)
+    params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
+    setpoints = read_trajectory_csv(traj_path).to_setpoints()
+    force = None
+    if force_path is not None:
+        fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])
+        force = ForceSchedule(fc["t"], np.column_stack([fc["F_bx"], fc["F_by"], fc["T_bz"]]))
+    sensors = Sensors(encoder_counts, current_noise, jitter, seed)
+    try:
+        (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt,
+                             controller=Controller(kp, ki, torque_limit), sensors=sensors,
+                             force=force, initial_delta=initial_pivots if initial_pivots ==
+                             "auto" else None, quiet=quiet, source=out_path)
+    except ValueError as exc:
+        raise InputError(f"--rate {rate} / --dt {dt}: {exc}") from None
+    if not np.all(np.isfinite(result.q)):
+        raise InputError(f"{traj_path}: the simulation diverged; lower the setpoints or raise "
+                         "--torque-limit")
+    write_log(result.log, out_path, platform)
     if not quiet:
         click.echo(f"wrote {out_path}: {result.log.n_samples} samples, "
                    f"{result.log.duration:.2f} s at {rate:g} Hz", err=True)

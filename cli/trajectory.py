@@ -10,9 +10,8 @@ from typing import Any
 
 import click
 
-from ropod_sysid.cli.common import given, quiet_option, reports_errors
+from ropod_sysid.cli.common import given, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
-from ropod_sysid.io.atomic import OutputSet
 from ropod_sysid.platform import Platform, load_platform
 
 OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
@@ -69,13 +68,8 @@ def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]
         raise InputError(f"--floor: {exc}") from None
 
 
-def _variant_files(out: str) -> list[tuple[str, Path]]:
-    """The four files a run is written to, as outputs of --out."""
-    return [("--out", Path(out) / name) for name in OUT_FILES.values()]
-
-
 def _write_variants(traj: Any, out: str) -> list[Path]:
-    """Write the run and its variants into ``out`` (inside the command's OutputSet)."""
+    """Write the run and its variants into ``out`` (made and checked by ``writes``)."""
     from ropod_sysid.trajectory import variants
 
     written = []
@@ -122,6 +116,8 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
 @output_options
 @quiet_option
 @reports_errors
+@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
+        folder_files=OUT_FILES.values())
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                     pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
                     duration: float, platform_path: str | None, seed: int, dt: float, out: str,
@@ -134,11 +130,9 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
         raise InputError(f"--duration {duration:g}: must be a positive number of seconds")
     if not (0 < dt <= 0.1):
         raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
-    with OutputSet(_variant_files(out), [("--platform", platform_path)],
-                   folders=[("--out", out)]):
-        traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
-                       _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
-        written = _write_variants(traj, out)
+    traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
+                   _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
+    written = _write_variants(traj, out)
     if not quiet:
         click.echo(f"typical run: {traj.duration:g} s, {traj.n_samples} setpoints; wrote "
                    + ", ".join(str(p) for p in written))
@@ -161,6 +155,8 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @output_options
 @quiet_option
 @reports_errors
+@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
+        folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                      pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
                      platform_path: str, duration: float, harmonics: int, objective: str,
@@ -171,12 +167,10 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
     if not (0 < dt <= 0.1):
         raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
-    with OutputSet(_variant_files(out), [("--platform", platform_path)],
-                   folders=[("--out", out)]):
-        platform = load_platform(platform_path)
-        result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
-                          _floor(floor), progress=not quiet, dt=dt)
-        written = _write_variants(result.trajectory, out)
+    platform = load_platform(platform_path)
+    result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
+                      _floor(floor), progress=not quiet, dt=dt)
+    written = _write_variants(result.trajectory, out)
     if not quiet:
         click.echo(f"optimised run: {result.trajectory.duration:g} s, condition number "
                    f"{result.condition_number:.4g} (rank {result.rank}, identifiable "
@@ -203,6 +197,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="Plot of the path and the setpoints (.png or .svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @reports_errors
+@writes(outputs={"plot_path": "--plot"},
+        inputs={"traj_path": "TRAJ.csv", "platform_path": "--platform",
+                "params_path": "--params"})
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
                   floor: tuple[float, ...], noise: float, log_rate: float, friction: str,
@@ -219,19 +216,17 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
         raise InputError(f"--log-rate {log_rate:g}: must be a positive number")
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
-    inputs = [("TRAJ.csv", traj_path), ("--platform", platform_path), ("--params", params_path)]
-    with OutputSet([("--plot", plot_path)], inputs):
-        platform = load_platform(platform_path)
-        traj = read_trajectory_csv(traj_path)
-        params = None
-        if params_path is not None:
-            from ropod_sysid.io.paramfile import read_truth_parameters
+    platform = load_platform(platform_path)
+    traj = read_trajectory_csv(traj_path)
+    params = None
+    if params_path is not None:
+        from ropod_sysid.io.paramfile import read_truth_parameters
 
-            params = read_truth_parameters(params_path, platform.unit_names)
-        fl = _floor(floor)
-        report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
-        if plot_path is not None:
-            plot(traj, plot_path, fl, limits, platform)
+        params = read_truth_parameters(params_path, platform.unit_names)
+    fl = _floor(floor)
+    report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
+    if plot_path is not None:
+        plot(traj, plot_path, fl, limits, platform)
     if as_json:
         click.echo(json.dumps(report.to_dict(), indent=2, ensure_ascii=False))
     else:
