@@ -226,13 +226,13 @@ class OutputSet:
             what = "exists" if Path(path) == folder else f"its folder {folder} exists"
             raise InputError(f"{label} {path}: {what} and is not a directory; give a "
                              "directory")
-        missing = [p for p in (folder, *folder.parents) if not p.exists()]
+        # innermost first; remembered before mkdir, which may make some and then fail
+        self._created = [p for p in (folder, *folder.parents) if not p.exists()] + self._created
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise InputError(f"{label} {path}: cannot create the directory {folder} "
                              f"({exc.strerror or exc}); give a writable folder") from None
-        self._created = missing + self._created  # innermost first
 
     def _remove_folders(self) -> None:
         for folder in self._created:
