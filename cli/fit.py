@@ -11,18 +11,20 @@ from ropod_sysid.cli.common import (
     platform_option,
     quiet_option,
     reports_errors,
+    writes,
 )
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, FitResult, fit_files
 from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.paramfile import write_parameter_file
+from ropod_sysid.io.paramfile import ParameterFile, write_parameter_file
 from ropod_sysid.io.timebase import GAP_RULE
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
 from ropod_sysid.solve import RCOND
-from ropod_sysid.summary import format_fit
+from ropod_sysid.stream import validate_sources
+from ropod_sysid.summary import format_fit, format_validation
 
 workers_option = click.option(
     "--workers", type=int, default=None, metavar="N",
@@ -152,14 +154,19 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the HTML fit report here.")
 @click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
-              help="With --report: a parameter file shown side by side.")
+              help="A parameter file (or flat truth mapping) shown side by side: in the "
+                   "report, or without --report beside the printed parameter table.")
 @click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
-              help="With --report: validation log (repeatable).")
+              help="Validation log (repeatable): in the report, or without --report the "
+                   "printed validation summary (as 'ropod-sysid validate').")
 @split_gaps_option
 @workers_option
 @dask_option
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out", "report_path": "--report"},
+        inputs={"logs": "LOGS", "platform_path": "--platform", "compare_path": "--compare",
+                "validate_logs": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
             span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool,
@@ -179,6 +186,13 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         if not quiet:
             click.echo(msg, err=True)
 
+    compare: ParameterFile | None = None
+    compare_label: str | None = None
+    if compare_path is not None or report_path is not None:
+        # the report module (and matplotlib) only when needed: keeps a plain fit quick
+        from ropod_sysid.report import read_comparison, write_fit_report
+
+        compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
     result = fit_files(list(logs), platform, options, workers=workers,
                        dask_address=dask_address, quiet=quiet)
     check_enough(result, logs)
@@ -187,13 +201,21 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         # the report plots every sample: it needs the logs in memory
         loaded = pieces_of(logs, platform, split_gaps, options.span, options.row_step)
     write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
+    validation = None
+    if validate_logs and report_path is None:
+        validation = validate_sources(list(validate_logs), platform, result.fitted_parameters(),
+                                      options.span, result.input_delay, workers=workers,
+                                      dask_address=dask_address, row_step=options.row_step,
+                                      quiet=quiet, split_gaps=split_gaps)
     if report_path is not None:
-        from ropod_sysid.report import write_fit_report
-
-        write_fit_report(result, loaded, report_path, compare=compare_path,
+        write_fit_report(result, loaded, report_path, compare=compare, compare_label=compare_label,
                          validation_logs=pieces_of(validate_logs, platform, split_gaps,
                                                    options.span, options.row_step))
         say(f"wrote {report_path}")
-    if not quiet:
-        click.echo(format_fit(result))
+        compare = None  # shown in the report
+    if not quiet or compare is not None:  # --compare without --report: the table is its output
+        click.echo(format_fit(result, compare, compare_label))
+    if validation is not None:
+        click.echo("validation of the fitted values on the --validate logs:")
+        click.echo(format_validation(validation))
     say(f"wrote {out_path}")

@@ -6,9 +6,14 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import SpanType, platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import (
+    SpanType,
+    platform_option,
+    quiet_option,
+    reports_errors,
+    writes,
+)
 from ropod_sysid.cli.fit import pieces_of, split_gaps_option
-from ropod_sysid.errors import InputError
 from ropod_sysid.fit import fit_settings
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.platform import load_platform
@@ -33,6 +38,9 @@ from ropod_sysid.regressor import Span
 @split_gaps_option
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out"},
+        inputs={"logs": "LOGS", "platform_path": "--platform", "params_path": "--params",
+                "compare_path": "--compare", "validate_paths": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_path: str,
             compare_path: str | None, validate_paths: tuple[str, ...], span: Span | None,
             split_gaps: bool, quiet: bool) -> None:
@@ -43,9 +51,6 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     """
     from ropod_sysid.report import result_from_parameter_file, write_fit_report
 
-    if Path(out_path).is_dir():
-        raise InputError(f"--out {out_path}: is a directory; give the report's file name, e.g. "
-                         "report.html")
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     compare = read_parameter_file(compare_path) if compare_path is not None else None

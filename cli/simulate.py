@@ -5,7 +5,14 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from ropod_sysid.cli.common import Number, platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import (
+    Number,
+    given,
+    platform_option,
+    quiet_option,
+    reports_errors,
+    writes,
+)
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, write_log
 from ropod_sysid.io.csvlog import read_numeric_table
@@ -56,6 +63,9 @@ from ropod_sysid.trajectory import read_trajectory_csv
               show_default=True, help="auto: units trail the first motion; zero: all along x.")
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out"},
+        inputs={"platform_path": "--platform", "params_path": "--params",
+                "traj_path": "--trajectory", "force_path": "--force"})
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
             dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
             seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
@@ -66,6 +76,9 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     sensors = Sensors(encoder_counts, current_noise, jitter, seed)
     controller = Controller(kp, ki, torque_limit)
     check_run(rate, dt, controller, sensors)  # before any work
+    if given("seed") and not (current_noise > 0 or jitter > 0):
+        raise InputError(f"--seed {seed}: seeds the current noise and timestamp jitter, and "
+                         "neither is on; give --current-noise or --jitter, or leave out --seed")
     platform = load_platform(platform_path)
     values = read_truth_parameters(params_path, platform.unit_names)
     params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)

@@ -12,10 +12,12 @@ from ropod_sysid.cli.common import (
     POSITIVE_INT,
     SEED,
     Number,
+    given,
     json_text,
     positive,
     quiet_option,
     reports_errors,
+    writes,
 )
 from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform, load_platform
@@ -54,6 +56,9 @@ def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
             pivot_rate_max: float, no_pivot_limit: bool) -> Any:
     from ropod_sysid.trajectory import Limits
 
+    if no_pivot_limit and given("pivot_rate_max"):
+        raise InputError(f"--pivot-rate-max {pivot_rate_max:g} and --no-pivot-limit: give one "
+                         "of them")
     return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max)
 
 
@@ -68,25 +73,13 @@ def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]
         raise InputError(f"--floor: {exc}") from None
 
 
-def _out_dir(out: str) -> Path:
-    path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory; give a directory")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the directory ({exc.strerror or exc})"
-                         ) from None
-    return path
-
-
 def _write_variants(traj: Any, out: str) -> list[Path]:
+    """Write the run and its variants into ``out`` (made and checked by ``writes``)."""
     from ropod_sysid.trajectory import variants
 
-    folder = _out_dir(out)
     written = []
     for name, vt in variants(traj).items():
-        target = folder / OUT_FILES[name]
+        target = Path(out) / OUT_FILES[name]
         try:
             vt.write_csv(target)
         except OSError as exc:
@@ -130,6 +123,8 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
 @output_options
 @quiet_option
 @reports_errors
+@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
+        folder_files=OUT_FILES.values())
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                     pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
                     duration: float, platform_path: str | None, seed: int, dt: float, out: str,
@@ -165,6 +160,8 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @output_options
 @quiet_option
 @reports_errors
+@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
+        folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                      pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
                      platform_path: str, duration: float, harmonics: int, objective: str,
@@ -174,7 +171,6 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
     platform = load_platform(platform_path)
-    _out_dir(out)
     result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
                       _floor(floor), progress=not quiet, dt=dt)
     written = _write_variants(result.trajectory, out)
@@ -204,6 +200,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="Plot of the path and the setpoints (.png or .svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @reports_errors
+@writes(outputs={"plot_path": "--plot"},
+        inputs={"traj_path": "TRAJ.csv", "platform_path": "--platform",
+                "params_path": "--params"})
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
                   floor: tuple[float, ...], noise: float, log_rate: float, friction: str,

@@ -21,7 +21,7 @@ from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import Friction, kind_of, parameter_names
+from ropod_sysid.params import DynamicParameters, Friction, kind_of, parameter_names
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles, usable_pieces
 from ropod_sysid.solve import (
@@ -104,6 +104,13 @@ class FitResult:
     def values(self) -> dict[str, float]:
         sol = self.physical or self.solution
         return dict(zip(sol.names, map(float, sol.values), strict=True))
+
+    def fitted_parameters(self) -> DynamicParameters:
+        """The values the fit reports (the physically consistent ones if made) as a model's
+        parameters, e.g. to validate them on other logs."""
+        shown = self.physical.values if self.physical is not None else self.solution.values
+        return DynamicParameters.from_vector(shown, self.platform.unit_names,
+                                             self.options.friction)
 
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (data contract), with the fit's account in extras."""

@@ -45,7 +45,6 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
     UNITS_OF,
-    DynamicParameters,
     kind_of,
     parameter_names,
 )
@@ -53,10 +52,11 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span, preprocess, system, triangles
 from ropod_sysid.report import figures
 from ropod_sysid.solve import combined_rms
-from ropod_sysid.summary import identifiability_verdict, implausible, relative_std
+from ropod_sysid.summary import difference, identifiability_verdict, implausible, relative_std
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
 
-__all__ = ["render_fit_report", "result_from_parameter_file", "write_fit_report"]
+__all__ = ["read_comparison", "render_fit_report", "result_from_parameter_file",
+           "write_fit_report"]
 
 WEAK_RELATIVE_STD = 0.2  # the summary's threshold for "weakly determined"
 
@@ -282,13 +282,7 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
             o = other.get(name)
             row["other"] = o
             row["other_std"] = other_std.get(name)
-            if o is not None and math.isfinite(o):
-                diff = value - o
-                row["diff"] = diff
-                row["rel_diff"] = diff / abs(o) if o != 0 else None
-                row["z"] = diff / std if math.isfinite(std) and std > 0 else None
-            else:
-                row["diff"] = row["rel_diff"] = row["z"] = None
+            row["diff"], row["rel_diff"], row["z"] = difference(value, std, o)
         rows.append(row)
     only_other = [k for k in other if k not in sol.names]
     return rows, only_other
@@ -311,7 +305,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
     if len(logs) != len(result.logs):
         raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
                          f"{len(logs)}")
-    compare_pf, compare_label = _compare(compare, compare_label, result.platform.unit_names)
+    compare_pf, compare_label = read_comparison(compare, compare_label, result.platform.unit_names)
     platform = result.platform
     sol = result.solution
     physical = result.physical is not None
@@ -325,11 +319,9 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
 
     validation = []
     if validation_logs:
-        params = DynamicParameters.from_vector(shown, platform.unit_names,
-                                               result.options.friction)
-        for k, v in enumerate(validate_logs(validation_logs, platform, params,
-                                            result.options.span, result.input_delay,
-                                            result.options.row_step)):
+        for k, v in enumerate(validate_logs(validation_logs, platform,
+                                            result.fitted_parameters(), result.options.span,
+                                            result.input_delay, result.options.row_step)):
             validation.append({
                 "id": f"validation-{k + 1}", "source": v.source, "name": _short(v.source),
                 "samples": v.samples,
@@ -391,8 +383,8 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
     return _environment().get_template("report.html").render(**context)
 
 
-def _compare(compare: str | Path | ParameterFile | None, label: str | None,
-             units: Sequence[str]) -> tuple[ParameterFile | None, str | None]:
+def read_comparison(compare: str | Path | ParameterFile | None, label: str | None,
+                    units: Sequence[str]) -> tuple[ParameterFile | None, str | None]:
     """The parameter file to show beside the fit: a fit's parameter file, or a flat
     name → value mapping such as a simulation's truth."""
     if compare is None:
