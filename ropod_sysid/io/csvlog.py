@@ -28,6 +28,7 @@ import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.damage import read_error, reading
 from ropod_sysid.io.log import Log
 from ropod_sysid.platform import Platform
 
@@ -270,15 +271,11 @@ def _open(path: Path, where: str, binary: bool = False):
 
 
 def _read_header(path: Path, where: str) -> list[str]:
-    with _open(path, where, binary=True) as f:
-        try:
-            raw = f.readline()
-            blank_file = not raw.strip() and not any(
-                chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
-            )
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+    with reading(path, where), _open(path, where, binary=True) as f:
+        raw = f.readline()
+        blank_file = not raw.strip() and not any(
+            chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
+        )
     if not raw.strip():
         if blank_file:
             raise InputError(
@@ -418,28 +415,25 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
     convert_options = pacsv.ConvertOptions(column_types={c: pa.float64() for c in include},
                                            include_columns=include)
     with _open(path, where, binary=True) as f:
-        try:
-            f.readline()  # the header (one line, as _read_header reads it)
-            rest = b""
-            while True:
+        f.readline()  # the header (one line, as _read_header reads it)
+        rest = b""
+        while True:
+            with reading(path, where):
                 data = f.read(block_bytes)
-                buf = rest + data
-                if data:
-                    cut = buf.rfind(b"\n") + 1
-                    if cut == 0:  # no line end yet: read more
-                        rest = buf
-                        continue
-                    piece, rest = buf[:cut], buf[cut:]
-                else:
-                    piece, rest = buf, b""
-                if piece and not piece.isspace():  # (strip() would copy the piece)
-                    yield _parse_piece(piece, include, read_options, parse_options,
-                                       convert_options)
-                if not data:
-                    return
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+            buf = rest + data
+            if data:
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:  # no line end yet: read more
+                    rest = buf
+                    continue
+                piece, rest = buf[:cut], buf[cut:]
+            else:
+                piece, rest = buf, b""
+            if piece and not piece.isspace():  # (strip() would copy the piece)
+                yield _parse_piece(piece, include, read_options, parse_options,
+                                   convert_options)
+            if not data:
+                return
 
 
 def _parse_piece(piece: bytes, include: list[str], read_options: pacsv.ReadOptions,
@@ -486,12 +480,8 @@ def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_i
 
 def _row_bytes(path: Path, where: str) -> int:
     """Bytes per data row, estimated from the first few rows (for Arrow's block size)."""
-    with _open(path, where, binary=True) as f:
-        try:
-            head = f.read(1 << 16)
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+    with reading(path, where), _open(path, where, binary=True) as f:
+        head = f.read(1 << 16)
     lines = head.split(b"\n")[1:-1] or [head]
     return max(16, int(1.25 * max(len(ln) + 1 for ln in lines)))
 
@@ -594,8 +584,17 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
                 data = np.array(
                     [pc.cast(pc.filter(cols[k], keep), pa.float64()).to_numpy() for k in col_idx],
                     dtype=np.float64).reshape(len(col_idx), -1)
+                nonfinite = ~np.isfinite(data)   # numbers too large for a float (1e400)
+                if nonfinite.any():
+                    r = int(np.flatnonzero(nonfinite.any(axis=0))[0])
+                    j = next(j for j in order if nonfinite[j, r])
+                    raw = batch.column(col_idx[j])[int(data_rows[r])].as_py()
+                    raise InputError(f"{where}: line {line_of(row0 - n + int(data_rows[r]))}, "
+                                     f"column '{wanted[j]}' {_value_problem(raw)}")
                 yielded += data.shape[1]
                 yield data
+    except OSError as exc:      # damaged gzip data (Arrow decompresses .gz itself)
+        raise read_error(path, where, exc) from None
     except (_NoLineNumbers, pa.ArrowException):
         # Arrow cannot even read it as text: the csv module, row by row (the rows already
         # yielded are skipped)
@@ -613,7 +612,7 @@ class _NoLineNumbers(Exception):
 
 def _records(path: Path, where: str) -> Iterator[tuple[int, list[str]]]:
     """Non-blank data records after the header, with the file line each starts on."""
-    with _open(path, where) as f:
+    with reading(path, where), _open(path, where) as f:
         reader = csv.reader(f, skipinitialspace=True)
         try:
             next(reader)
@@ -637,10 +636,17 @@ def _value_problem(text: str) -> str | None:
                "remove the line"
     if low in _NULLS:
         return f"is NaN ({s!r}); the log must be finite — repair or remove the line"
+    if "\ufffd" in s:   # undecodable bytes, read as U+FFFD
+        return (f"has bytes that are not UTF-8 text ({s!r}); the file is damaged there — "
+                "repair or remove the line")
     if not _NUMBER.match(s):
         return f"has {s!r}, which is not a number; fix the value or remove the line"
     if low.lstrip("+-") in ("inf", "infinity"):
         return f"is infinite ({s!r}); the log must be finite — repair or remove the line"
+    if math.isinf(float(s)):
+        shown = repr(s) if len(s) <= 24 else f"a number of {len(s)} characters ({s[:10]!r}…)"
+        return (f"has {shown}, which is too large for a float (it overflows to infinity); the "
+                "log must be finite — repair or remove the line")
     return None
 
 
