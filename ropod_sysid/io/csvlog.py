@@ -300,6 +300,18 @@ def _read_header(path: Path, where: str) -> list[str]:
     return header
 
 
+def check_csv_lines(path: str | Path, n_fields: int, columns: dict[str, int]) -> None:
+    """Raise the :class:`InputError` of :func:`read_csv_log` for the first damaged line of a
+    CSV with a one-line header and ``n_fields`` fields per line, if any: a wrong field count,
+    or a value in ``columns`` (name → field index) that is empty, text, NaN or infinite.
+
+    For readers of other CSV layouts, to name the line when their own parse fails.
+    """
+    for _ in _diagnose_chunks(Path(path), str(path), n_fields, list(columns),
+                              list(columns.values())):
+        pass
+
+
 def _check_columns(names: list[str], required: list[str], platform: Platform,
                    where: str) -> None:
     seen: dict[str, int] = {}

@@ -394,6 +394,10 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
                                                  include_columns=list(types)),
         )
     except (pa.ArrowException, ValueError, OSError) as exc:
+        from ropod_sysid.io.csvlog import check_csv_lines
+
+        # name the line (field count, text, overflow) as the contract reader does
+        check_csv_lines(path, len(names), {names[int(c[1:])]: int(c[1:]) for c in types})
         msg = " ".join(str(exc).split())
         msg = re.sub(r"column #(\d+)",
                      lambda mm: f"column '{names[int(mm.group(1))]}'"
