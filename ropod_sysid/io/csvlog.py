@@ -312,6 +312,28 @@ def check_csv_lines(path: str | Path, n_fields: int, columns: dict[str, int]) ->
         pass
 
 
+def check_csv_overflow(path: str | Path, columns: dict[str, int], rows: np.ndarray) -> None:
+    """Raise :class:`InputError` for the first of the data ``rows`` (0-based, in file order)
+    whose value in ``columns`` (name → field index) is written as a finite number but is too
+    large for a float (``1e400``) — for readers that keep spelled-out NaN and infinity (the
+    smart-wheel layout drops those frames) but must not take damaged digits for them."""
+    where = str(path)
+    wanted = set(np.asarray(rows).tolist())
+    if not wanted:
+        return
+    last = max(wanted)
+    finite_text = re.compile(_FINITE_RE)
+    for r, (line, rec) in enumerate(_records(Path(path), where)):
+        if r in wanted:
+            for name, k in columns.items():
+                text = rec[k].strip() if k < len(rec) else ""
+                if finite_text.match(text) and math.isinf(float(text)):
+                    raise InputError(f"{where}: line {line}, column '{name}' "
+                                     f"{_value_problem(text)}")
+        if r >= last:
+            return
+
+
 def _check_columns(names: list[str], required: list[str], platform: Platform,
                    where: str) -> None:
     seen: dict[str, int] = {}

@@ -50,6 +50,7 @@ def gzip_damage(path: Path) -> str | None:
     """What is wrong with the gzip data of ``path`` (decompressed once, in blocks, counting
     lines), or None if it decompresses cleanly. Lines count from 1, the header being line 1."""
     newlines = 0
+    last = b"\n"    # the last decompressed byte
     member = 0       # gzip members (concatenated streams) started
     d = zlib.decompressobj(wbits=31)
     pending = b""
@@ -71,11 +72,20 @@ def gzip_damage(path: Path) -> str | None:
                                 f"text (after line {newlines}); copy the file again, or cut "
                                 "the extra bytes off")
                     member += 1
+                before = d.copy()
                 try:
                     out = d.decompress(raw)
                 except zlib.error as exc:
-                    return _corrupt(str(exc), newlines)
+                    for k in range(len(raw)):   # the block again, byte by byte, up to the damage
+                        try:
+                            out = before.decompress(raw[k:k + 1])
+                        except zlib.error:
+                            break
+                        newlines += out.count(b"\n")
+                        last = out[-1:] or last
+                    return _corrupt(str(exc), newlines, last != b"\n")
                 newlines += out.count(b"\n")
+                last = out[-1:] or last
                 if d.eof:
                     pending = d.unused_data
     except OSError as exc:
@@ -83,16 +93,18 @@ def gzip_damage(path: Path) -> str | None:
     if member == 0:
         return None  # an empty file: the readers say so themselves
     if not d.eof:
-        return (f"the compressed data ends early, in line {newlines + 1}: the .csv.gz file is "
-                "truncated — copy it again, or decompress the readable part (zcat) into a .csv "
-                "and remove its last, partial line")
+        at = f"in line {newlines + 1}" if last != b"\n" else f"after line {newlines}"
+        return (f"the compressed data ends early, {at}: the .csv.gz file is truncated — copy it "
+                "again, or decompress the readable part (zcat) into a .csv and remove its last, "
+                "partial line")
     return None
 
 
-def _corrupt(reason: str, newlines: int) -> str:
+def _corrupt(reason: str, newlines: int, partial: bool) -> str:
+    """The message for a zlib error after ``newlines`` line ends (and a ``partial`` line)."""
     if "incorrect data check" in reason or "incorrect length check" in reason:
         return (f"the gzip checksum does not match: the compressed data is corrupt somewhere in "
-                f"lines 1–{newlines + 1}; copy the file again from the recording")
+                f"lines 1–{max(newlines + partial, 1)}; copy the file again from the recording")
     why = reason.split(":", 1)[-1].strip()
     return (f"the compressed data is corrupt in line {newlines + 1} ({why}); copy the file again "
             f"from the recording, or use the lines before it")

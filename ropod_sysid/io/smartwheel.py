@@ -417,6 +417,12 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
         ts[:, k] = table.column(f"c{present[(k, 'sensor_ts')]}").to_numpy()
         for name in REQUIRED_FLOATS:
             vals[name][:, k] = table.column(f"c{present[(k, name)]}").to_numpy()
+    nonfinite = ~np.isfinite(np.stack(list(vals.values()))).all(axis=(0, 2))
+    if nonfinite.any():   # spelled-out NaN/inf frames are dropped below, damaged digits are not
+        from ropod_sysid.io.csvlog import check_csv_overflow
+
+        check_csv_overflow(path, {names[int(c[1:])]: int(c[1:]) for c in types},
+                           np.flatnonzero(nonfinite))
     notes = []
     if count > n:
         notes.append(f"{where}: the smart-wheel data has {count} sensors; the first {n} are "
