@@ -154,12 +154,10 @@ GZIP_CASES = {"gz_truncated": gz_truncated, "gz_checksum": gz_checksum, "gz_plai
 
 
 @pytest.mark.parametrize("name", COMMANDS)
-@pytest.mark.parametrize("case", list(CONTRACT_CASES) + list(GZIP_CASES))
-@pytest.mark.parametrize("compressed", [False, True], ids=["csv", "csv.gz"])
+@pytest.mark.parametrize("case, compressed", [(c, z) for c in CONTRACT_CASES for z in (0, 1)]
+                         + [(c, 1) for c in GZIP_CASES])
 def test_damaged_contract_csv_is_one_line(tmp_path, d, case, compressed, name):
     if case in GZIP_CASES:
-        if not compressed:
-            pytest.skip("gzip damage needs a .csv.gz")
         data, message = GZIP_CASES[case](d)
     else:
         data, message = CONTRACT_CASES[case](d)
@@ -220,6 +218,73 @@ def test_spelled_out_nan_in_the_smartwheel_layout_is_still_a_dropped_frame(tmp_p
     with pytest.warns(UserWarning, match=r"1 with NaN or infinite values: frames #28 "):
         out = read_log(log, load_platform(d / "platform.yaml"))
     assert out.n_samples == 300
+
+
+def mcap_with_message(d: Path, path: Path, k: int, replace: tuple[bytes, bytes]) -> None:
+    """The short log as a contract JSON MCAP (intact CRCs) whose message ``k`` has its first
+    ``replace[0]`` replaced by ``replace[1]`` (a producer that wrote a bad value)."""
+    import json
+    import re
+
+    from ropod_sysid.io.mcaplog import (
+        CONTRACT_JSON_SCHEMA,
+        CONTRACT_TOPIC,
+        UNIT_FIELDS,
+        contract_json_schema,
+        new_writer,
+    )
+
+    log = read_log(d / "ok.csv", load_platform(d / "platform.yaml"))
+    with open(path, "wb") as f:
+        w = new_writer(f)
+        sid = w.register_schema(CONTRACT_JSON_SCHEMA, "jsonschema",
+                                json.dumps(contract_json_schema(log.units, False)).encode())
+        cid = w.register_channel(CONTRACT_TOPIC, "json", sid, {"layout": "ropod_sysid/contract"})
+        for j in range(log.n_samples):
+            vals = np.stack([log.delta[j], log.phi[j, :, 0], log.phi[j, :, 1],
+                             log.current[j, :, 0], log.current[j, :, 1]], axis=-1).tolist()
+            msg = {"t": float(log.t[j]), "units": {
+                u: dict(zip(UNIT_FIELDS, v, strict=True)) for u, v in zip(log.units, vals,
+                                                                          strict=True)}}
+            payload = json.dumps(msg).encode()
+            if j == k:
+                payload = re.sub(replace[0], replace[1], payload, count=1)
+            ns = int(round(float(log.t[j]) * 1e9))
+            w.add_message(cid, ns, payload, ns, j)
+        w.finish()
+
+
+MCAP_CASES = {
+    "many_digits": ((rb'"phi_R": [^,}]+', b'"phi_R": ' + b"9" * 400),
+                    "message 40 has a number too large for a float in units.1.phi_R (400 digits; "
+                    "it overflows to infinity); the log must be finite — repair or cut the "
+                    "recording"),
+    "overflow": ((rb'"cur_L": [^,}]+', b'"cur_L": -1e400'),
+                 "message 40 has a NaN or infinite value (units.1.cur_L = -inf); the log must be "
+                 "finite — repair or cut the recording"),
+    "text": ((rb'"t": [^,}]+', b'"t": "0.4 s"'),
+             "message 40 has '0.4 s' in t, which is not a number; repair or cut the recording"),
+}
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+@pytest.mark.parametrize("case", list(MCAP_CASES))
+def test_bad_value_in_an_intact_mcap_is_one_line(tmp_path, d, case, name):
+    replace, message = MCAP_CASES[case]
+    log = tmp_path / "run.mcap"
+    mcap_with_message(d, log, 40, replace)
+    refused(command(name, log, d), [log], f"{log}: {message}")
+
+
+def test_a_smartwheel_value_too_large_for_a_float_drops_its_frame(off_square):
+    from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, frames_from_messages
+
+    decoded = [{"sensors": [{"sensor_ts": 1_000_000 * (k + 1), **dict.fromkeys(REQUIRED_FLOATS,
+                                                                               24.0)}
+                            for _ in range(4)]} for k in range(5)]
+    decoded[3]["sensors"][2]["encoder_2"] = 10**400
+    frames = frames_from_messages(decoded, off_square, "sw.mcap")
+    assert frames.malformed.tolist() == [False, False, False, True, False]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -196,7 +196,8 @@ def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
                 ts[k, i] = _ts_value(get(s, "sensor_ts"))
                 for j, name in enumerate(REQUIRED_FLOATS):
                     vals[j, k, i] = float(get(s, name))
-        except (KeyError, AttributeError, IndexError, TypeError, ValueError) as exc:
+        except (KeyError, AttributeError, IndexError, TypeError, ValueError,
+                OverflowError) as exc:
             if k == 0:
                 raise InputError(_first_frame_problem(exc, m, n, platform, where, sensors_of,
                                                       get)) from None
