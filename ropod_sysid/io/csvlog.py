@@ -575,6 +575,7 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
     yielded = 0
     row0 = 0
     last_data_line = 0
+    reader: pacsv.CSVStreamingReader | None = None
     try:
         reader = pacsv.open_csv(
             path,
@@ -636,6 +637,11 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
         if rest.shape[1] > yielded:
             yield rest[:, yielded:]
         return
+    finally:
+        # stop Arrow's reader now, not when an error's traceback lets go of this frame (at
+        # interpreter exit its threads may be gone: "Exception ignored" or an abort)
+        if reader is not None:
+            reader.close()
     if invalid:
         raise count_error(last=len(invalid) == 1 and last_data_line < invalid[0][0])
 
