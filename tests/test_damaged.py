@@ -199,7 +199,15 @@ def sw_truncated(d: Path) -> tuple[bytes, str]:
                         "truncated; remove line 201")
 
 
-SW_CASES = {"not_utf8": sw_not_utf8, "overflow": sw_overflow, "truncated": sw_truncated}
+def sw_clock_digits(d: Path) -> tuple[bytes, str]:
+    k = sw_field(d, "sensors.1.sensor_ts")
+    return with_field(sw_lines(d), 12, k, b"9" * 30), (
+        "line 12, column 'sensors.1.sensor_ts' has '999999999999… (30 digits)', which is not a "
+        "whole number of nanoseconds from 0 to 2^64 − 1; fix the value or remove the line")
+
+
+SW_CASES = {"not_utf8": sw_not_utf8, "overflow": sw_overflow, "truncated": sw_truncated,
+            "clock_digits": sw_clock_digits}
 
 
 @pytest.mark.parametrize("name", COMMANDS)

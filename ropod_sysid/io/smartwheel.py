@@ -400,6 +400,16 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
         # name the line (field count, text, overflow) as the contract reader does
         check_csv_lines(path, len(names), {names[int(c[1:])]: int(c[1:]) for c in types})
         msg = " ".join(str(exc).split())
+        bad_ts = re.search(r"column #(\d+): CSV conversion error to uint64: invalid value '(.*)'",
+                           msg)
+        if bad_ts and int(bad_ts.group(1)) < len(names):    # e.g. too many digits
+            k, value = int(bad_ts.group(1)), bad_ts.group(2)
+            line = _line_with(path, k, value)
+            shown = value if len(value) <= 24 else f"{value[:12]}… ({len(value)} digits)"
+            raise InputError(
+                f"{where}: line {line}, column '{names[k]}' has {shown!r}, which is not a "
+                f"whole number of nanoseconds from 0 to 2^64 − 1; fix the value or remove the "
+                "line") from None
         msg = re.sub(r"column #(\d+)",
                      lambda mm: f"column '{names[int(mm.group(1))]}'"
                      if int(mm.group(1)) < len(names) else mm.group(0), msg)
@@ -430,6 +440,16 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
                      f"read as units {', '.join(platform.unit_names)}")
     frames = SmartWheelFrames(ts, vals, np.zeros(n_rows, dtype=bool), where, notes)
     return frames_to_log(frames, platform, where)
+
+
+def _line_with(path: Path, k: int, value: str) -> int:
+    """The file line of the first record whose field ``k`` is ``value`` (error path only)."""
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
+        reader = csv.reader(f)
+        for rec in reader:
+            if len(rec) > k and rec[k].strip() == value:
+                return reader.line_num
+    return 0  # pragma: no cover - Arrow named a value that is in the file
 
 
 def read_smartwheel(path: str | Path, platform: Platform) -> Log:
