@@ -23,7 +23,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io import read_log, write_log
 from ropod_sysid.io.csvlog import iter_csv_log, read_csv_log
 from ropod_sysid.io.mcaplog import iter_mcap_log, read_mcap_log
-from ropod_sysid.io.smartwheel import write_smartwheel
+from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, write_smartwheel
 from ropod_sysid.platform import load_platform, save_platform
 from ropod_sysid.simulate import simulate
 from tests.conftest import smooth_setpoints
@@ -285,7 +285,7 @@ def test_bad_value_in_an_intact_mcap_is_one_line(tmp_path, d, case, name):
 
 
 def test_a_smartwheel_value_too_large_for_a_float_drops_its_frame(off_square):
-    from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, frames_from_messages
+    from ropod_sysid.io.smartwheel import frames_from_messages
 
     decoded = [{"sensors": [{"sensor_ts": 1_000_000 * (k + 1), **dict.fromkeys(REQUIRED_FLOATS,
                                                                                24.0)}
@@ -383,16 +383,23 @@ REPLACEMENTS = (b"abc", b"", b"nan", b"1e400", b"-" + b"9" * 400, b"\xff", b"1,2
                 b"0.5", b"-1e-400", b"7")
 VALID_NUMBERS = (b"0.5", b"-1e-400", b"7")
 
-damage = st.tuples(
-    st.sampled_from(("flip", "delete", "duplicate", "replace", "truncate", "not_utf8",
-                     "gz_truncate", "gz_flip")),
-    st.floats(0, 1, exclude_max=True), st.floats(0, 1, exclude_max=True),
-    st.sampled_from(REPLACEMENTS), st.booleans(),
-)
+TEXT_DAMAGE = ("flip", "delete", "duplicate", "replace", "truncate", "not_utf8")
 
 
-def damage_csv(data: bytes, how: tuple) -> tuple[bytes, bool, bool]:
-    """(damaged file, compressed, must be refused) for a contract CSV ``data``.
+def damage_of(kinds: tuple[str, ...]) -> st.SearchStrategy:
+    """(kind, position, position, replacement, compressed) for :func:`damage_csv`."""
+    return st.tuples(st.sampled_from(kinds), st.floats(0, 1, exclude_max=True),
+                     st.floats(0, 1, exclude_max=True), st.sampled_from(REPLACEMENTS),
+                     st.booleans())
+
+
+damage = damage_of(TEXT_DAMAGE + ("gz_truncate", "gz_flip"))
+
+
+def damage_csv(data: bytes, how: tuple, used: list[int] | None = None,
+               ) -> tuple[bytes, bool, bool]:
+    """(damaged file, compressed, must be refused) for a contract CSV ``data``; ``used``: the
+    fields a reader reads (all of them by default; a replaced field is one of them).
 
     Structural damage must be noticed: a duplicated line (time stops increasing, or the header
     becomes a row of text), a deleted header, a field replaced by something that is not a
@@ -405,6 +412,9 @@ def damage_csv(data: bytes, how: tuple) -> tuple[bytes, bool, bool]:
     if kind.startswith("gz_"):
         compressed = True
     lines = data.split(b"\n")[:-1]               # the file ends with a line end
+    n_fields = lines[0].count(b",") + 1
+    every = used is None
+    used = list(range(n_fields)) if used is None else used
     i = int(u * len(lines))
     must = False
     if kind == "flip":
@@ -413,7 +423,7 @@ def damage_csv(data: bytes, how: tuple) -> tuple[bytes, bool, bool]:
         out = bytearray(data)
         out[pos] ^= 1 << bit
         data = bytes(out)
-        must = bit == 7                           # a byte ≥ 0x80 alone is never UTF-8
+        must = bit == 7 and every                 # a byte ≥ 0x80 alone is never UTF-8
     elif kind == "delete":
         del lines[i]
         data = b"".join(ln + b"\n" for ln in lines)
@@ -425,7 +435,7 @@ def damage_csv(data: bytes, how: tuple) -> tuple[bytes, bool, bool]:
     elif kind == "replace":
         i = max(i, 1)
         fields = lines[i].split(b",")
-        fields[int(v * len(fields))] = value
+        fields[used[int(v * len(used))]] = value
         lines[i] = b",".join(fields)
         data = b"".join(ln + b"\n" for ln in lines)
         must = value not in VALID_NUMBERS
@@ -433,11 +443,11 @@ def damage_csv(data: bytes, how: tuple) -> tuple[bytes, bool, bool]:
         cut = int(u * len(data))
         data = data[:cut]
         tail = data.rsplit(b"\n", 1)[-1]
-        must = len(tail) > 0 and tail.count(b",") + 1 < FIELDS
+        must = len(tail) > 0 and tail.count(b",") + 1 < n_fields
     elif kind == "not_utf8":
         pos = int(u * len(data))
         data = data[:pos] + b"\xff" + data[pos:]
-        must = True
+        must = every
     packed = gzip.compress(data, mtime=0) if compressed else data
     if kind == "gz_truncate":
         packed = packed[: int(u * len(packed))]
@@ -497,6 +507,33 @@ def test_fuzz_csv_reader(tmp_path, d, off_square, how):
     parts, _ = chunked[1]
     np.testing.assert_array_equal(np.concatenate([p.t for p in parts]), log.t)
     np.testing.assert_array_equal(np.concatenate([p.current for p in parts]), log.current)
+
+
+@FUZZ
+@given(how=damage_of(TEXT_DAMAGE))
+def test_fuzz_smartwheel_csv_reader(tmp_path, d, off_square, how):
+    """Property: a damaged smart-wheel CSV reads (frames dropped with a warning naming them, or
+    nothing noticed for damage that leaves valid frames) or raises a one-line InputError
+    naming the file — nothing else, within 10 s. Structural damage in the fields the layout
+    uses (a duplicated line: its clock stops increasing; a deleted header, a used field that
+    is not a finite number, a cut last line) is refused or noted."""
+    data = (d / "sw.csv").read_bytes()
+    names = data.split(b"\n", 1)[0].decode().split(",")
+    used = [k for k, name in enumerate(names)
+            if name.split(".")[-1] in ("sensor_ts", *REQUIRED_FLOATS)
+            and int(name.split(".")[1]) < off_square.n_units]
+    damaged, _, must = damage_csv(data, (*how[:4], False), used)
+    path = tmp_path / "sw.csv"
+    path.write_bytes(damaged)
+    result = outcome(lambda: read_log(path, off_square))
+    event(f"{how[0]}: {result[0]}")
+    if result[0] == "error":
+        assert str(result[1]).startswith(f"{path}: ")
+        return
+    log, caught = result[1]
+    check_log(log, path)
+    if must:
+        assert caught and log.notes, how
 
 
 @FUZZ
