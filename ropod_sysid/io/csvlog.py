@@ -14,6 +14,7 @@ Line numbers in messages are 1-based lines of the file, the header being line 1.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import gzip
 import math
@@ -577,6 +578,10 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
     last_data_line = 0
     reader: pacsv.CSVStreamingReader | None = None
     try:
+        if not _valid_utf8(path, where):
+            # Arrow's handler of bad rows would fail to decode their text ("Exception
+            # ignored"): the csv module reads the bytes as U+FFFD instead
+            raise _NoLineNumbers
         reader = pacsv.open_csv(
             path,
             read_options=pacsv.ReadOptions(use_threads=False, column_names=arrow_names,
@@ -648,6 +653,19 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
 
 class _NoLineNumbers(Exception):
     pass
+
+
+def _valid_utf8(path: Path, where: str) -> bool:
+    """Whether the whole file is UTF-8 text (one decoding pass, error path only)."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    with reading(path, where), _open(path, where, binary=True) as f:
+        try:
+            for block in iter(lambda: f.read(_DIAG_BLOCK), b""):
+                decoder.decode(block)
+            decoder.decode(b"", final=True)
+        except UnicodeDecodeError:
+            return False
+    return True
 
 
 def _records(path: Path, where: str) -> Iterator[tuple[int, list[str]]]:
