@@ -449,26 +449,26 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
     parse_options = pacsv.ParseOptions(delimiter=",")
     convert_options = pacsv.ConvertOptions(column_types={c: pa.float64() for c in include},
                                            include_columns=include)
-    with _open(path, where, binary=True) as f:
-        f.readline()  # the header (one line, as _read_header reads it)
-        rest = b""
-        while True:
-            with reading(path, where):
+    with _open(path, where, binary=True) as f:  # noqa: SIM117 - errors of reading, not opening
+        with reading(path, where):  # damaged gzip data, I/O errors
+            f.readline()  # the header (one line, as _read_header reads it)
+            rest = b""
+            while True:
                 data = f.read(block_bytes)
-            buf = rest + data
-            if data:
-                cut = buf.rfind(b"\n") + 1
-                if cut == 0:  # no line end yet: read more
-                    rest = buf
-                    continue
-                piece, rest = buf[:cut], buf[cut:]
-            else:
-                piece, rest = buf, b""
-            if piece and not piece.isspace():  # (strip() would copy the piece)
-                yield _parse_piece(piece, include, read_options, parse_options,
-                                   convert_options)
-            if not data:
-                return
+                buf = rest + data
+                if data:
+                    cut = buf.rfind(b"\n") + 1
+                    if cut == 0:  # no line end yet: read more
+                        rest = buf
+                        continue
+                    piece, rest = buf[:cut], buf[cut:]
+                else:
+                    piece, rest = buf, b""
+                if piece and not piece.isspace():  # (strip() would copy the piece)
+                    yield _parse_piece(piece, include, read_options, parse_options,
+                                       convert_options)
+                if not data:
+                    return
 
 
 def _parse_piece(piece: bytes, include: list[str], read_options: pacsv.ReadOptions,
