@@ -162,7 +162,16 @@ def short_line_not_utf8(d: Path) -> tuple[bytes, str]:
 
 CONTRACT_CASES = {"not_utf8": not_utf8, "short_line_not_utf8": short_line_not_utf8,
                   "overflow": overflow, "many_digits": many_digits}
-GZIP_CASES = {"gz_truncated": gz_truncated, "gz_checksum": gz_checksum, "gz_plain": gz_plain}
+def gz_header(d: Path) -> tuple[bytes, str]:
+    """A reserved flag bit set: zlib and Arrow refuse it, Python's gzip would read on."""
+    packed = bytearray(gzip.compress((d / "ok.csv").read_bytes()))
+    packed[3] |= 0x40
+    return bytes(packed), ("the compressed data is corrupt from its start, in line 1 (unknown "
+                           "header flags set); copy the file again from the recording")
+
+
+GZIP_CASES = {"gz_truncated": gz_truncated, "gz_checksum": gz_checksum, "gz_plain": gz_plain,
+              "gz_header": gz_header}
 
 
 @pytest.mark.parametrize("name", COMMANDS)

@@ -29,7 +29,7 @@ import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
-from ropod_sysid.io.damage import read_error, reading
+from ropod_sysid.io.damage import check_gzip_start, is_gzip_name, read_error, reading
 from ropod_sysid.io.log import Log
 from ropod_sysid.platform import Platform
 
@@ -277,6 +277,8 @@ def _read_header(path: Path, where: str) -> list[str]:
         blank_file = not raw.strip() and not any(
             chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
         )
+    if is_gzip_name(path):
+        check_gzip_start(path, where)
     if not raw.strip():
         if blank_file:
             raise InputError(

@@ -46,9 +46,19 @@ def reading(path: Path, where: str) -> Iterator[None]:
         raise read_error(path, where, exc) from None
 
 
-def gzip_damage(path: Path) -> str | None:
+def check_gzip_start(path: Path, where: str) -> None:
+    """Raise :class:`InputError` if the start of a ``.gz`` file is damaged (its header above
+    all: Python's :mod:`gzip` ignores reserved flag bits that zlib and Arrow refuse, so the
+    readers would disagree on such a file)."""
+    damage = gzip_damage(path, limit=_BLOCK)
+    if damage is not None:
+        raise InputError(f"{where}: {damage}")
+
+
+def gzip_damage(path: Path, limit: int | None = None) -> str | None:
     """What is wrong with the gzip data of ``path`` (decompressed once, in blocks, counting
-    lines), or None if it decompresses cleanly. Lines count from 1, the header being line 1."""
+    lines), or None if it decompresses cleanly. Lines count from 1, the header being line 1.
+    With ``limit``, only the first ``limit`` compressed bytes are looked at."""
     newlines = 0
     last = b"\n"    # the last decompressed byte
     member = 0       # gzip members (concatenated streams) started
@@ -61,6 +71,8 @@ def gzip_damage(path: Path) -> str | None:
                 pending = b""
                 if not raw:
                     break
+                if limit is not None and f.tell() > limit and member:
+                    return None
                 if member == 0 or d.eof:
                     if d.eof:
                         d = zlib.decompressobj(wbits=31)
@@ -106,5 +118,8 @@ def _corrupt(reason: str, newlines: int, partial: bool) -> str:
         return (f"the gzip checksum does not match: the compressed data is corrupt somewhere in "
                 f"lines 1–{max(newlines + partial, 1)}; copy the file again from the recording")
     why = reason.split(":", 1)[-1].strip()
+    if newlines == 0:
+        return (f"the compressed data is corrupt from its start, in line 1 ({why}); copy the file "
+                "again from the recording")
     return (f"the compressed data is corrupt in line {newlines + 1} ({why}); copy the file again "
             f"from the recording, or use the lines before it")
