@@ -356,8 +356,9 @@ def test_not_utf8_in_the_middle(tmp_path):
     p = tmp_path / "run.csv"
     lines = simple_lines(5)
     p.write_bytes(("\n".join(lines[:3]) + "\n").encode() + b"0.3\xff\xfe" + b",1" * 20 + b"\n")
-    assert error_of(p) == (f"{p}: line 4, column 't' has '0.3\ufffd\ufffd', which is not a "
-                           "number; fix the value or remove the line")
+    assert error_of(p) == (f"{p}: line 4, column 't' has bytes that are not UTF-8 text "
+                           "('0.3\ufffd\ufffd'); the file is damaged there — repair or remove "
+                           "the line")
 
 
 def test_errors_after_many_rows(tmp_path):

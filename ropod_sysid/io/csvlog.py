@@ -14,6 +14,7 @@ Line numbers in messages are 1-based lines of the file, the header being line 1.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import gzip
 import math
@@ -28,6 +29,7 @@ import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.damage import check_gzip_start, is_gzip_name, read_error, reading
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import Gaps, Locate, TimeBase, check_order, check_times, checked_chunks
 from ropod_sysid.platform import Platform
@@ -261,15 +263,13 @@ def _open(path: Path, where: str, binary: bool = False):
 
 
 def _read_header(path: Path, where: str) -> list[str]:
-    with _open(path, where, binary=True) as f:
-        try:
-            raw = f.readline()
-            blank_file = not raw.strip() and not any(
-                chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
-            )
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+    with reading(path, where), _open(path, where, binary=True) as f:
+        raw = f.readline()
+        blank_file = not raw.strip() and not any(
+            chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
+        )
+    if is_gzip_name(path):
+        check_gzip_start(path, where)
     if not raw.strip():
         if blank_file:
             raise InputError(
@@ -292,6 +292,40 @@ def _read_header(path: Path, where: str) -> list[str]:
     except csv.Error as exc:
         raise InputError(f"{where}: line 1 (header) is not valid CSV ({exc})") from None
     return header
+
+
+def check_csv_lines(path: str | Path, n_fields: int, columns: dict[str, int]) -> None:
+    """Raise the :class:`InputError` of :func:`read_csv_log` for the first damaged line of a
+    CSV with a one-line header and ``n_fields`` fields per line, if any: a wrong field count,
+    or a value in ``columns`` (name → field index) that is empty, text, NaN or infinite.
+
+    For readers of other CSV layouts, to name the line when their own parse fails.
+    """
+    for _ in _diagnose_chunks(Path(path), str(path), n_fields, list(columns),
+                              list(columns.values())):
+        pass
+
+
+def check_csv_overflow(path: str | Path, columns: dict[str, int], rows: np.ndarray) -> None:
+    """Raise :class:`InputError` for the first of the data ``rows`` (0-based, in file order)
+    whose value in ``columns`` (name → field index) is written as a finite number but is too
+    large for a float (``1e400``) — for readers that keep spelled-out NaN and infinity (the
+    smart-wheel layout drops those frames) but must not take damaged digits for them."""
+    where = str(path)
+    wanted = set(np.asarray(rows).tolist())
+    if not wanted:
+        return
+    last = max(wanted)
+    finite_text = re.compile(_FINITE_RE)
+    for r, (line, rec) in enumerate(_records(Path(path), where)):
+        if r in wanted:
+            for name, k in columns.items():
+                text = rec[k].strip() if k < len(rec) else ""
+                if finite_text.match(text) and math.isinf(float(text)):
+                    raise InputError(f"{where}: line {line}, column '{name}' "
+                                     f"{_value_problem(text)}")
+        if r >= last:
+            return
 
 
 def _check_columns(names: list[str], required: list[str], platform: Platform,
@@ -408,8 +442,8 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
     parse_options = pacsv.ParseOptions(delimiter=",")
     convert_options = pacsv.ConvertOptions(column_types={c: pa.float64() for c in include},
                                            include_columns=include)
-    with _open(path, where, binary=True) as f:
-        try:
+    with _open(path, where, binary=True) as f:  # noqa: SIM117 - errors of reading, not opening
+        with reading(path, where):  # damaged gzip data, I/O errors
             f.readline()  # the header (one line, as _read_header reads it)
             rest = b""
             while True:
@@ -428,9 +462,6 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
                                        convert_options)
                 if not data:
                     return
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
 
 
 def _parse_piece(piece: bytes, include: list[str], read_options: pacsv.ReadOptions,
@@ -477,12 +508,8 @@ def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_i
 
 def _row_bytes(path: Path, where: str) -> int:
     """Bytes per data row, estimated from the first few rows (for Arrow's block size)."""
-    with _open(path, where, binary=True) as f:
-        try:
-            head = f.read(1 << 16)
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+    with reading(path, where), _open(path, where, binary=True) as f:
+        head = f.read(1 << 16)
     lines = head.split(b"\n")[1:-1] or [head]
     return max(16, int(1.25 * max(len(ln) + 1 for ln in lines)))
 
@@ -542,7 +569,12 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
     yielded = 0
     row0 = 0
     last_data_line = 0
+    reader: pacsv.CSVStreamingReader | None = None
     try:
+        if not _valid_utf8(path, where):
+            # Arrow's handler of bad rows would fail to decode their text ("Exception
+            # ignored"): the csv module reads the bytes as U+FFFD instead
+            raise _NoLineNumbers
         reader = pacsv.open_csv(
             path,
             read_options=pacsv.ReadOptions(use_threads=False, column_names=arrow_names,
@@ -585,8 +617,17 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
                 data = np.array(
                     [pc.cast(pc.filter(cols[k], keep), pa.float64()).to_numpy() for k in col_idx],
                     dtype=np.float64).reshape(len(col_idx), -1)
+                nonfinite = ~np.isfinite(data)   # numbers too large for a float (1e400)
+                if nonfinite.any():
+                    r = int(np.flatnonzero(nonfinite.any(axis=0))[0])
+                    j = next(j for j in order if nonfinite[j, r])
+                    raw = batch.column(col_idx[j])[int(data_rows[r])].as_py()
+                    raise InputError(f"{where}: line {line_of(row0 - n + int(data_rows[r]))}, "
+                                     f"column '{wanted[j]}' {_value_problem(raw)}")
                 yielded += data.shape[1]
                 yield data
+    except OSError as exc:      # damaged gzip data (Arrow decompresses .gz itself)
+        raise read_error(path, where, exc) from None
     except (_NoLineNumbers, pa.ArrowException):
         # Arrow cannot even read it as text: the csv module, row by row (the rows already
         # yielded are skipped)
@@ -594,6 +635,11 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
         if rest.shape[1] > yielded:
             yield rest[:, yielded:]
         return
+    finally:
+        # stop Arrow's reader now, not when an error's traceback lets go of this frame (at
+        # interpreter exit its threads may be gone: "Exception ignored" or an abort)
+        if reader is not None:
+            reader.close()
     if invalid:
         raise count_error(last=len(invalid) == 1 and last_data_line < invalid[0][0])
 
@@ -602,9 +648,22 @@ class _NoLineNumbers(Exception):
     pass
 
 
+def _valid_utf8(path: Path, where: str) -> bool:
+    """Whether the whole file is UTF-8 text (one decoding pass, error path only)."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    with reading(path, where), _open(path, where, binary=True) as f:
+        try:
+            for block in iter(lambda: f.read(_DIAG_BLOCK), b""):
+                decoder.decode(block)
+            decoder.decode(b"", final=True)
+        except UnicodeDecodeError:
+            return False
+    return True
+
+
 def _records(path: Path, where: str) -> Iterator[tuple[int, list[str]]]:
     """Non-blank data records after the header, with the file line each starts on."""
-    with _open(path, where) as f:
+    with reading(path, where), _open(path, where) as f:
         reader = csv.reader(f, skipinitialspace=True)
         try:
             next(reader)
@@ -628,10 +687,17 @@ def _value_problem(text: str) -> str | None:
                "remove the line"
     if low in _NULLS:
         return f"is NaN ({s!r}); the log must be finite — repair or remove the line"
+    if "\ufffd" in s:   # undecodable bytes, read as U+FFFD
+        return (f"has bytes that are not UTF-8 text ({s!r}); the file is damaged there — "
+                "repair or remove the line")
     if not _NUMBER.match(s):
         return f"has {s!r}, which is not a number; fix the value or remove the line"
     if low.lstrip("+-") in ("inf", "infinity"):
         return f"is infinite ({s!r}); the log must be finite — repair or remove the line"
+    if math.isinf(float(s)):
+        shown = repr(s) if len(s) <= 24 else f"a number of {len(s)} characters ({s[:10]!r}…)"
+        return (f"has {shown}, which is too large for a float (it overflows to infinity); the "
+                "log must be finite — repair or remove the line")
     return None
 
 

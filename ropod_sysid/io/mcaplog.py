@@ -64,6 +64,7 @@ ENCODINGS = ("json", "ros2")
 CHUNK_SIZE = 64 * 1024
 MIN_SAMPLES = 3
 UNIT_FIELDS = ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
+_FLOAT_MAX = int(np.finfo(np.float64).max)   # a larger JSON integer overflows a float
 POSE_FIELDS = ("x_b", "y_b", "theta_b")
 _MAX_CHUNK = 1 << 30   # a larger uncompressed chunk size is taken for damage
 _LIBRARY = "ropod-sysid"
@@ -619,10 +620,14 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
                 if pose is not None:
                     p = m["pose"]
                     pose[k] = (p["x_b"], p["y_b"], p["theta_b"])
-            except (KeyError, TypeError, ValueError) as exc:
+            except KeyError as exc:
                 raise InputError(f"{where}: message {offset + k} lacks a log field "
                                  f"({_field(exc)}); every message needs t and delta, phi_L, "
                                  "phi_R, cur_L, cur_R of every unit") from None
+            except (TypeError, ValueError, OverflowError) as exc:
+                raise InputError(f"{where}: message {offset + k} "
+                                 f"{_json_value_problem(m, units, pose is not None, exc)}") \
+                    from None
     else:
         first_units = list(decoded[0].units)
         _check_units(first_units, platform, where)
@@ -650,14 +655,42 @@ def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: 
         bad |= ~np.isfinite(pose).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise InputError(f"{where}: message {offset + k} has a NaN or infinite value; the log "
-                         "must be finite — repair or cut the recording")
+        named = [("t", t[k])] + [(f"units.{u}.{f}", vals[k, i, j]) for i, u in enumerate(units)
+                                 for j, f in enumerate(UNIT_FIELDS)]
+        if pose is not None:
+            named += [(f"pose.{f}", pose[k, j]) for j, f in enumerate(POSE_FIELDS)]
+        name, value = next((n, v) for n, v in named if not np.isfinite(v))
+        raise InputError(f"{where}: message {offset + k} has a NaN or infinite value ({name} = "
+                         f"{float(value)!r}); the log must be finite — repair or cut the "
+                         "recording")
     if whole and n < MIN_SAMPLES:
         raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
                          f"{MIN_SAMPLES} samples are needed — use a longer log")
     return Log(t=t, units=list(units), delta=np.ascontiguousarray(vals[:, :, 0]),
                phi=np.ascontiguousarray(vals[:, :, 1:3]),
                current=np.ascontiguousarray(vals[:, :, 3:5]), pose=pose, source=where)
+
+
+def _json_value_problem(m: Any, units: list[str], pose: bool, exc: BaseException) -> str:
+    """What is wrong with the first field of JSON message ``m`` that is not a number."""
+    paths = [("t",)] + [("units", u, f) for u in units for f in UNIT_FIELDS] \
+        + ([("pose", f) for f in POSE_FIELDS] if pose else [])
+    for path in paths:
+        v = m
+        try:
+            for key in path:
+                v = v[key]
+        except (KeyError, TypeError, IndexError):
+            return (f"lacks the log field {'.'.join(path)!r}; every message needs t and delta, "
+                    "phi_L, phi_R, cur_L, cur_R of every unit")
+        if isinstance(v, int) and not isinstance(v, bool) and abs(v) > _FLOAT_MAX:
+            return (f"has a number too large for a float in {'.'.join(path)} ({len(str(v))} "
+                    "digits; it overflows to infinity); the log must be finite — repair or cut "
+                    "the recording")
+        if not isinstance(v, int | float):
+            return (f"has {str(v)[:40]!r} in {'.'.join(path)}, which is not a number; repair or "
+                    "cut the recording")
+    return f"has a malformed log field ({type(exc).__name__}); repair or cut the recording"
 
 
 def _field(exc: BaseException) -> str:

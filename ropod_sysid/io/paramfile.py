@@ -48,6 +48,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.params import parameter_names
 from ropod_sysid.platform import Platform
+from ropod_sysid.yamlload import safe_load
 
 Format = Literal["json", "yaml", "ros2", "kelo"]
 FORMATS: tuple[str, ...] = ("json", "yaml", "ros2", "kelo")
@@ -359,7 +360,7 @@ def _load_mapping(path: Path, where: str, what: str) -> Any:
 
 def _yaml(text: str, where: str) -> Any:
     try:
-        return yaml.safe_load(text)
+        return safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f" line {mark.line + 1}:" if mark is not None else ""

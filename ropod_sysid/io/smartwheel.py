@@ -197,7 +197,8 @@ def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
                 ts[k, i] = _ts_value(get(s, "sensor_ts"))
                 for j, name in enumerate(REQUIRED_FLOATS):
                     vals[j, k, i] = float(get(s, name))
-        except (KeyError, AttributeError, IndexError, TypeError, ValueError) as exc:
+        except (KeyError, AttributeError, IndexError, TypeError, ValueError,
+                OverflowError) as exc:
             if k == 0:
                 raise InputError(_first_frame_problem(exc, m, n, platform, where, sensors_of,
                                                       get)) from None
@@ -400,7 +401,21 @@ def read_smartwheel_csv(path: str | Path, platform: Platform, gaps: Gaps = "erro
                                                  include_columns=list(types)),
         )
     except (pa.ArrowException, ValueError, OSError) as exc:
+        from ropod_sysid.io.csvlog import check_csv_lines
+
+        # name the line (field count, text, overflow) as the contract reader does
+        check_csv_lines(path, len(names), {names[int(c[1:])]: int(c[1:]) for c in types})
         msg = " ".join(str(exc).split())
+        bad_ts = re.search(r"column #(\d+): CSV conversion error to uint64: invalid value '(.*)'",
+                           msg)
+        if bad_ts and int(bad_ts.group(1)) < len(names):    # e.g. too many digits
+            k, value = int(bad_ts.group(1)), bad_ts.group(2)
+            line = _line_with(path, k, value)
+            shown = value if len(value) <= 24 else f"{value[:12]}… ({len(value)} digits)"
+            raise InputError(
+                f"{where}: line {line}, column '{names[k]}' has {shown!r}, which is not a "
+                f"whole number of nanoseconds from 0 to 2^64 − 1; fix the value or remove the "
+                "line") from None
         msg = re.sub(r"column #(\d+)",
                      lambda mm: f"column '{names[int(mm.group(1))]}'"
                      if int(mm.group(1)) < len(names) else mm.group(0), msg)
@@ -419,12 +434,28 @@ def read_smartwheel_csv(path: str | Path, platform: Platform, gaps: Gaps = "erro
         ts[:, k] = table.column(f"c{present[(k, 'sensor_ts')]}").to_numpy()
         for name in REQUIRED_FLOATS:
             vals[name][:, k] = table.column(f"c{present[(k, name)]}").to_numpy()
+    nonfinite = ~np.isfinite(np.stack(list(vals.values()))).all(axis=(0, 2))
+    if nonfinite.any():   # spelled-out NaN/inf frames are dropped below, damaged digits are not
+        from ropod_sysid.io.csvlog import check_csv_overflow
+
+        check_csv_overflow(path, {names[int(c[1:])]: int(c[1:]) for c in types},
+                           np.flatnonzero(nonfinite))
     notes = []
     if count > n:
         notes.append(f"{where}: the smart-wheel data has {count} sensors; the first {n} are "
                      f"read as units {', '.join(platform.unit_names)}")
     frames = SmartWheelFrames(ts, vals, np.zeros(n_rows, dtype=bool), where, notes)
     return frames_to_log(frames, platform, where, gaps=gaps)
+
+
+def _line_with(path: Path, k: int, value: str) -> int:
+    """The file line of the first record whose field ``k`` is ``value`` (error path only)."""
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
+        reader = csv.reader(f)
+        for rec in reader:
+            if len(rec) > k and rec[k].strip() == value:
+                return reader.line_num
+    return 0  # pragma: no cover - Arrow named a value that is in the file
 
 
 def read_smartwheel(path: str | Path, platform: Platform) -> Log:
