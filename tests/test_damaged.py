@@ -22,6 +22,7 @@ from ropod_sysid.cli.main import main
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import read_log, write_log
 from ropod_sysid.io.csvlog import iter_csv_log, read_csv_log
+from ropod_sysid.io.log import Log
 from ropod_sysid.io.mcaplog import iter_mcap_log, read_mcap_log
 from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, write_smartwheel
 from ropod_sysid.platform import load_platform, save_platform
@@ -37,7 +38,7 @@ FUZZ = settings(
     derandomize=not _RANDOM, database=None, deadline=None,  # time is bounded by the property
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
-TIME_LIMIT = 10.0  # seconds per read or per fit of a damaged 3 s log
+TIME_LIMIT = 10.0  # seconds per read or per fit of a damaged 12 s log
 # an exception a callback or a finaliser could only print ("Exception ignored in ...") fails
 pytestmark = pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning")
 FIELDS = 21        # t + 4 units × 5 columns
@@ -45,9 +46,11 @@ FIELDS = 21        # t + 4 units × 5 columns
 
 @pytest.fixture(scope="module")
 def d(tmp_path_factory, off_square, truth) -> Path:
-    """A short valid log (3 s at 100 Hz) in every format, its platform and fitted parameters."""
+    """A short valid log (12 s at 100 Hz: long enough to fit) in every format, its platform and
+    fitted parameters."""
     d = tmp_path_factory.mktemp("damaged")
     (run,) = simulate(off_square, truth, [smooth_setpoints(3.0, 1, 1)], rate=100.0)
+    run.log = there_and_back(there_and_back(run.log))
     save_platform(off_square, d / "platform.yaml")
     write_log(run.log, d / "ok.csv")
     write_log(run.log, d / "ok.mcap")
@@ -57,6 +60,16 @@ def d(tmp_path_factory, off_square, truth) -> Path:
             str(d / "params.json"), "--quiet")
     assert r.exit_code == 0, r.output
     return d
+
+
+def there_and_back(log: Log) -> Log:
+    """The rest-to-rest run followed by itself backwards in time: every channel continuous, the
+    wheels' no-slip constraints kept (they are homogeneous in the rates), twice the length."""
+    t = np.concatenate([log.t, log.t[-1] + (log.t[1] - log.t[0]) + (log.t - log.t[0])])
+    def back(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([a, a[::-1]])
+    return Log(t, list(log.units), back(log.delta), back(log.phi), back(log.current),
+               source=log.source)
 
 
 def cli(*args: str):
@@ -246,7 +259,7 @@ def test_spelled_out_nan_in_the_smartwheel_layout_is_still_a_dropped_frame(tmp_p
     log.write_bytes(with_field(sw_lines(d), 30, k, b"inf"))
     with pytest.warns(UserWarning, match=r"1 with NaN or infinite values: frames #28 "):
         out = read_log(log, load_platform(d / "platform.yaml"))
-    assert out.n_samples == 300
+    assert out.n_samples == 4 * 301 - 1  # one frame of four 3 s runs dropped
 
 
 def mcap_with_message(d: Path, path: Path, k: int, replace: tuple[bytes, bytes]) -> None:
