@@ -137,17 +137,14 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         if not quiet:
             click.echo(msg, err=True)
 
+    # with --report, the fit's pass also gathers what the report draws: no second reading
     result = fit_files(list(logs), platform, options, workers=workers,
-                       dask_address=dask_address, quiet=quiet)
-    loaded = None
-    if report_path is not None:
-        # the report plots every sample: it needs the logs in memory
-        loaded = [read_log(p, platform) for p in logs]
+                       dask_address=dask_address, quiet=quiet, plots=report_path is not None)
     write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
     if report_path is not None:
         from ropod_sysid.report import write_fit_report
 
-        write_fit_report(result, loaded, report_path, compare=compare_path,
+        write_fit_report(result, None, report_path, compare=compare_path,
                          validation_logs=[read_log(p, platform) for p in validate_logs])
         say(f"wrote {report_path}")
     if not quiet:

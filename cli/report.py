@@ -47,10 +47,11 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     pfile = read_parameter_file(params_path)
     compare = read_parameter_file(compare_path) if compare_path is not None else None
     sp = Span.parse(span) if span is not None else None
-    loaded = [read_log(p, platform) for p in logs]
     validation = [read_log(p, platform) for p in validate_paths]
-    result, notes = result_from_parameter_file(platform, loaded, pfile, sp, where=params_path)
-    write_fit_report(result, loaded, out_path, compare=compare,
+    # each log streamed once: triangles and what the report draws
+    result, notes = result_from_parameter_file(platform, list(logs), pfile, sp,
+                                               where=params_path)
+    write_fit_report(result, None, out_path, compare=compare,
                      compare_label=Path(compare_path).name if compare_path else None,
                      validation_logs=validation, params_source=params_path, notes=notes)
     if not quiet:

@@ -50,6 +50,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_from
 from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
+from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
     GRID_STEPS,
     Preprocessed,
@@ -105,6 +106,7 @@ class StreamResult:
     dt: float
     span_samples: int
     observer: ObserverStats | None = field(default=None, repr=False)
+    plot: LogPlot | None = field(default=None, repr=False)  # what the report draws
 
 
 # ---------------------------------------------------------------------------------------------
@@ -413,7 +415,7 @@ class _Blocks:
     def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
                  keep_series: bool, row_step: int | None = None, threaded: bool = True,
-                 ) -> None:
+                 plot: bool = False) -> None:
         self.platform = platform
         self.model = PlatformModel(platform)
         self.span = span
@@ -424,6 +426,7 @@ class _Blocks:
         self.source = source
         self.params = params
         self.keep_series = keep_series
+        self.gather = PlotGather() if plot else None
         self.parts: list[_Samples] = []
         self.g0 = 0  # index of the first buffered sample
         self.avail = 0  # samples received
@@ -564,6 +567,10 @@ class _Blocks:
         oa, ob = (0 if first else s), (r1 if last else e)
         if self.obs is not None:
             pa, pb = min(pa, oa), max(pb, ob)
+        if self.gather is not None:  # every sample once, as the observer sees them
+            jo, jp = slice(oa - r0, ob - r0), slice(oa - qa, ob - qa)
+            self.gather.push_samples(w.t[jo], q[jp], qd[jp], w.delta[jo],
+                                     self.platform.torque_constant * w.current[jo])
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
@@ -575,6 +582,9 @@ class _Blocks:
               last: bool) -> None:
         """The block's rows to its triangles, merged in order (and the observer's samples)."""
         a, b = row_system(self.model, pre, first, count, self.friction)
+        if self.gather is not None:
+            rows = first + self.grid.step * np.arange(count)
+            self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows])
         block = block_triangles(a, b, self.source)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
@@ -615,10 +625,11 @@ class _Blocks:
 
 def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
-          resample: bool, prefetch: bool, row_step: int | None) -> StreamResult:
+          resample: bool, prefetch: bool, row_step: int | None, plot: bool) -> StreamResult:
     name = source_name(source)
     blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params, keep_series,
-                     row_step, threaded=prefetch)
+                     row_step, threaded=prefetch, plot=plot)
+    raw, t_first, t_last = 0, math.nan, math.nan
     try:
         grid = _Grid(name, resample, blocks)
         notes: list[str] = []
@@ -628,23 +639,32 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
         for log in chunks:
             notes.extend(n for n in log.notes if n not in notes)  # (an MCAP's damage: last)
             grid.push(log)
+            if log.n_samples:
+                raw += log.n_samples
+                t_first = float(log.t[0]) if raw == log.n_samples else t_first
+                t_last = float(log.t[-1])
         notes += grid.finish()
         tri, obs, n = blocks.finish()
     finally:
         blocks.close()
-    return StreamResult(name, tri, notes, n, blocks.dt, blocks.k, obs)
+    shown = None
+    if blocks.gather is not None:
+        shown = blocks.gather.result(raw, t_last - t_first, bool(grid.has_pose), blocks.dt,
+                                     blocks.k, blocks.grid.step)
+    return StreamResult(name, tri, notes, n, blocks.dt, blocks.k, obs, shown)
 
 
 def stream_log(source: Source, platform: Platform, span: Span | None = None,
                input_delay: float = 0.0, friction: Friction = "per-wheel",
                chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                keep_series: bool = False, prefetch: bool = True,
-               row_step: int | None = None) -> StreamResult:
+               row_step: int | None = None, plot: bool = False) -> StreamResult:
     """One pass over a log (a file, or an in-memory :class:`Log`) in chunks of ``chunk``
     samples: its QR triangles per DOF, equal to ``triangles(model, preprocess(log, …))`` to
     rounding; with ``params`` also the disturbance observer's figures (``keep_series``: and
     its low-passed series, O(N) memory). ``row_step``: samples between equation rows
-    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span).
+    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span). ``plot``:
+    also gather what the report draws (:class:`ropod_sysid.plotdata.LogPlot`, bounded size).
 
     ``prefetch`` reads the next chunk in a background thread while one is processed, and
     reduces a block's rows in another while the next block is smoothed.
@@ -656,12 +676,12 @@ def stream_log(source: Source, platform: Platform, span: Span | None = None,
     with single_thread_blas():
         try:
             return _pass(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, False, prefetch, row_step)
+                         keep_series, False, prefetch, row_step, plot)
         except _OffGrid:
             # a step off the grid after the head: the log is jittered after all; again, on
             # the uniform grid from the start
             return _pass(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, True, prefetch, row_step)
+                         keep_series, True, prefetch, row_step, plot)
 
 
 def log_triangles(source: Source, platform: Platform, span: Span | None = None,
@@ -669,8 +689,19 @@ def log_triangles(source: Source, platform: Platform, span: Span | None = None,
                   chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
                   ) -> tuple[Triangles, list[str]]:
     """A log's triangles and reading notes (the unit of work of a fit; runs on Dask workers)."""
-    res = stream_log(source, platform, span, input_delay, friction, chunk, row_step=row_step)
-    return res.triangles, res.notes
+    tri, notes, _ = log_reduction(source, platform, span, input_delay, friction, chunk,
+                                  row_step)
+    return tri, notes
+
+
+def log_reduction(source: Source, platform: Platform, span: Span | None = None,
+                  input_delay: float = 0.0, friction: Friction = "per-wheel",
+                  chunk: int = DEFAULT_CHUNK, row_step: int | None = None, plot: bool = False,
+                  ) -> tuple[Triangles, list[str], LogPlot | None]:
+    """:func:`log_triangles`, with ``plot`` also what the report draws of the log."""
+    res = stream_log(source, platform, span, input_delay, friction, chunk, row_step=row_step,
+                     plot=plot)
+    return res.triangles, res.notes, res.plot
 
 
 def validate_source(source: Source, platform: Platform, params: DynamicParameters,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import matplotlib
 import numpy as np
@@ -18,6 +19,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator, NullLocator
+
+if TYPE_CHECKING:
+    from ropod_sysid.plotdata import LogPlot
 
 MAX_POINTS = 2000
 DPI = 96
@@ -136,9 +140,11 @@ def _style():
 # figures
 
 
-def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray) -> bytes:
+def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray,
+                    rms: Sequence[float] | None = None) -> bytes:
     """The thesis's Fig. 13 for one log: per DOF the fit A_ID,ext m* against the filtered b_ID
-    (upper panel) and the error b_ID − A_ID,ext m* (lower panel), over time."""
+    (upper panel) and the error b_ID − A_ID,ext m* (lower panel), over time. ``rms``: the RMS
+    error per DOF over all rows (default: over the rows given)."""
     with _style():
         fig = _figure(10.0, 8.4, top=0.97, bottom=0.055)
         gs = fig.add_gridspec(6, 1, height_ratios=[3, 1.3] * 3, hspace=0.32)
@@ -152,9 +158,12 @@ def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray) -> bytes:
             _line(top, t, b[:, d], color="#aeb8c3", lw=3.0, label="b_ID (filtered)")
             _line(top, t, fit[:, d], color=BLUE, lw=0.9, label="A_ID,ext m*")
             top.set_ylabel(f"{DOF_LABELS[d]} [{DOF_UNITS[d]}]")
-            rms = float(np.sqrt(np.mean(err[:, d] ** 2))) if len(err) else float("nan")
+            if rms is not None:
+                r = float(rms[d])
+            else:
+                r = float(np.sqrt(np.mean(err[:, d] ** 2))) if len(err) else float("nan")
             _title(top, f"{DOF_LABELS[d]} row of the direct EOM")
-            top.text(0.995, 0.96, f"RMS error {rms:.3g} {DOF_UNITS[d]}", transform=top.transAxes,
+            top.text(0.995, 0.96, f"RMS error {r:.3g} {DOF_UNITS[d]}", transform=top.transAxes,
                      ha="right", va="top", fontsize=8, color=RED,
                      bbox={"fc": "white", "ec": "none", "alpha": 0.8, "pad": 1.5})
             _line(bot, t, err[:, d], color=RED, lw=0.8)
@@ -169,13 +178,9 @@ def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray) -> bytes:
         return _png(fig)
 
 
-def inputs(t: np.ndarray, pose: np.ndarray, t_vel: np.ndarray, qd: np.ndarray,
-           delta: np.ndarray, torque: np.ndarray, units: Sequence[str]) -> bytes:
-    """The inputs of one log: base path (x–y), base velocities, pivot angles, wheel torques.
-
-    t : (N,) raw log time; pose : (M, 3) base pose on the preprocessed grid ``t_vel``;
-    qd : (M, 3) base velocities; delta : (N, n) pivot angles [rad]; torque : (N, n, 2) [N m].
-    """
+def inputs(plot: LogPlot, units: Sequence[str]) -> bytes:
+    """The inputs of one log: base path (x–y), base velocities, pivot angles, wheel torques,
+    from their min/max envelopes (:class:`ropod_sysid.plotdata.LogPlot`)."""
     with _style():
         fig = _figure(10.0, 6.4, top=0.95, bottom=0.08, left=0.065, right=0.99)
         gs = fig.add_gridspec(2, 2, wspace=0.2, hspace=0.32)
@@ -183,24 +188,24 @@ def inputs(t: np.ndarray, pose: np.ndarray, t_vel: np.ndarray, qd: np.ndarray,
         ax_vel = fig.add_subplot(gs[0, 1])
         ax_piv = fig.add_subplot(gs[1, 0])
         ax_tau = fig.add_subplot(gs[1, 1], sharex=ax_piv)
-        xd, yd = decimate(pose[:, 0], pose[:, 1])
+        xd, yd = decimate(plot.path[0][:, 0], plot.path[1][:, 0])
         # y's bucket extremes, x at the same (sorted) indices: the path stays in order
         ax_path.plot(xd, yd, color=BLUE, lw=1.1)
-        ax_path.plot(pose[0, 0], pose[0, 1], "o", color=GREEN, ms=5, label="start")
-        ax_path.plot(pose[-1, 0], pose[-1, 1], "s", color=RED, ms=5, label="end")
+        ax_path.plot(plot.start[0], plot.start[1], "o", color=GREEN, ms=5, label="start")
+        ax_path.plot(plot.end[0], plot.end[1], "s", color=RED, ms=5, label="end")
         ax_path.set_aspect("equal", adjustable="datalim")
         ax_path.set_xlabel("x_b [m]")
         ax_path.set_ylabel("y_b [m]")
         _title(ax_path, "base path")
         _legend_above(ax_path, ncols=2)
         for d, (lab, col) in enumerate(zip(VEL_LABELS, (BLUE, ORANGE, GREEN), strict=True)):
-            _line(ax_vel, t_vel, qd[:, d], color=col, label=lab)
+            _line(ax_vel, plot.velocity[0][:, d], plot.velocity[1][:, d], color=col, label=lab)
         ax_vel.set_xlabel("t [s]")
         _title(ax_vel, "base velocities")
         _legend_above(ax_vel, ncols=3)
         for i, u in enumerate(units):
-            _line(ax_piv, t, np.degrees(delta[:, i]), color=PALETTE[i % len(PALETTE)],
-                  label=f"δ {u}")
+            _line(ax_piv, plot.delta[0][:, i], np.degrees(plot.delta[1][:, i]),
+                  color=PALETTE[i % len(PALETTE)], label=f"δ {u}")
         ax_piv.set_xlabel("t [s]")
         ax_piv.set_ylabel("[deg]")
         _title(ax_piv, "pivot angles")
@@ -208,8 +213,9 @@ def inputs(t: np.ndarray, pose: np.ndarray, t_vel: np.ndarray, qd: np.ndarray,
         handles = []
         for i, u in enumerate(units):
             col = PALETTE[i % len(PALETTE)]
-            _line(ax_tau, t, torque[:, i, 0], color=col, lw=0.8)
-            _line(ax_tau, t, torque[:, i, 1], color=col, lw=0.8, ls="--")
+            tt, tau = plot.torque
+            _line(ax_tau, tt[:, 2 * i], tau[:, 2 * i], color=col, lw=0.8)
+            _line(ax_tau, tt[:, 2 * i + 1], tau[:, 2 * i + 1], color=col, lw=0.8, ls="--")
             handles.append(Line2D([], [], color=col, label=str(u)))
         handles += [Line2D([], [], color="#333", label="L"),
                     Line2D([], [], color="#333", ls="--", label="R")]
