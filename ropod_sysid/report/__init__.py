@@ -240,6 +240,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
     platform = result.platform
     opts = result.options
     views, errs, vels = [], [], []
+    fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.unit_names)
     for k, lf in enumerate(result.logs):
         plot = lf.plot
         if plot is None:
@@ -268,9 +269,9 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "notes": list(lf.notes),
             "span_samples": plot.span_samples,
             "row_step": plot.row_step,
-            "fig13": _png_uri(figures.fit_vs_measured(
-                plot.t_rows, plot.b_rows, fit, [rms["x"], rms["y"], rms["theta"]])),
-            "inputs": _png_uri(figures.inputs(plot, platform.unit_names)),
+            "fig13": _png_uri(fit_figure.render(plot.t_rows, plot.b_rows, fit,
+                                                [rms["x"], rms["y"], rms["theta"]])),
+            "inputs": _png_uri(inputs_figure.render(plot)),
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
         })
