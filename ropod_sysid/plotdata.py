@@ -25,14 +25,20 @@ MAX_BUCKETS = 2048  # envelope buckets per signal (the figures draw ~2000 points
 MAX_ROWS = 8192  # equation rows kept per log (all rows of the shipped 60 s, 100 Hz sample)
 
 
-def _first_per_group(group: np.ndarray, value: np.ndarray) -> np.ndarray:
+def _first_per_group(group: np.ndarray, value: np.ndarray, largest: bool) -> np.ndarray:
     """Per run of equal ``group`` (non-decreasing, (m,)) and per column of ``value`` (m, k):
-    the index of the smallest value (NaN only if the whole run is NaN). Returns (g, k)."""
+    the index of the first smallest (``largest``: largest) value, NaN ignored (a run of NaN
+    only gives its first index). Returns (g, k)."""
     starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
-    out = np.empty((starts.size, value.shape[1]), dtype=np.intp)
+    gidx = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, group.size]))
+    with np.errstate(invalid="ignore"):
+        ext = (np.fmax if largest else np.fmin).reduceat(value, starts, axis=0)
+    out = np.repeat(starts[:, None], value.shape[1], axis=1)
     for j in range(value.shape[1]):  # a few columns, each vectorised over the samples
-        order = np.lexsort((value[:, j], group))  # NaN sorts last
-        out[:, j] = order[starts]
+        hit = np.flatnonzero(value[:, j] == ext[gidx, j])
+        g = gidx[hit]
+        first = np.r_[True, g[1:] != g[:-1]] if g.size else np.zeros(0, bool)
+        out[g[first], j] = hit[first]
     return out
 
 
@@ -69,9 +75,9 @@ class Envelope:
             self._reduce(self.group // 2, self.ext)
 
     def _reduce(self, group: np.ndarray, parts: dict) -> None:
-        for side, sign in (("lo", 1.0), ("hi", -1.0)):
+        for side in ("lo", "hi"):
             i, x, y = parts[side]
-            pick = _first_per_group(group, sign * y)
+            pick = _first_per_group(group, y, side == "hi")
             cols = np.arange(y.shape[1])[None, :]
             self.ext[side] = (i[pick, cols], x[pick, cols], y[pick, cols])
         self.group = group[np.flatnonzero(np.r_[True, group[1:] != group[:-1]])]
