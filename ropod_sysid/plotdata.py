@@ -25,21 +25,40 @@ MAX_BUCKETS = 2048  # envelope buckets per signal (the figures draw ~2000 points
 MAX_ROWS = 8192  # equation rows kept per log (all rows of the shipped 60 s, 100 Hz sample)
 
 
-def _first_per_group(group: np.ndarray, value: np.ndarray, largest: bool) -> np.ndarray:
-    """Per run of equal ``group`` (non-decreasing, (m,)) and per column of ``value`` (m, k):
-    the index of the first smallest (``largest``: largest) value, NaN ignored (a run of NaN
-    only gives its first index). Returns (g, k)."""
-    starts = np.flatnonzero(np.r_[True, group[1:] != group[:-1]])
-    gidx = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, group.size]))
-    with np.errstate(invalid="ignore"):
-        ext = (np.fmax if largest else np.fmin).reduceat(value, starts, axis=0)
-    out = np.repeat(starts[:, None], value.shape[1], axis=1)
-    for j in range(value.shape[1]):  # a few columns, each vectorised over the samples
-        hit = np.flatnonzero(value[:, j] == ext[gidx, j])
-        g = gidx[hit]
-        first = np.r_[True, g[1:] != g[:-1]] if g.size else np.zeros(0, bool)
-        out[g[first], j] = hit[first]
-    return out
+def _extremes(x: np.ndarray, y: np.ndarray, idx0: int, width: int, largest: bool,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per run of ``width`` consecutive samples of y (m, k), m a multiple of ``width`` (one
+    run if ``width`` is m): each column's first smallest (``largest``: largest) value, NaN
+    ignored, with its sample index (from ``idx0``) and x. Returns i, x, y of shape (g, k)."""
+    m, k = y.shape
+    runs = y.reshape(m // width, width, k)
+    fill = -np.inf if largest else np.inf
+    nan = np.isnan(runs)
+    clean = np.where(nan, fill, runs) if nan.any() else runs
+    pick = (np.argmax if largest else np.argmin)(clean, axis=1)  # (g, k)
+    rows = pick + (np.arange(m // width) * width)[:, None]
+    return idx0 + rows, x[rows], np.take_along_axis(y, rows, axis=0)
+
+
+def _merge_neighbours(group: np.ndarray, ext: dict[str, tuple[np.ndarray, ...]],
+                      ) -> tuple[np.ndarray, dict[str, tuple[np.ndarray, ...]]]:
+    """Entries in sample order whose group equals the next one's (pairs at most) merged into
+    one: the smaller (``lo``) or larger (``hi``) value, the earlier one on a tie or NaN."""
+    same = np.flatnonzero(group[1:] == group[:-1])
+    if not same.size:
+        return group, ext
+    keep = np.ones(group.size, bool)
+    keep[same + 1] = False
+    out = {}
+    for side, (i, x, y) in ext.items():
+        a, b = y[same], y[same + 1]
+        with np.errstate(invalid="ignore"):
+            later = (b > a if side == "hi" else b < a) | (np.isnan(a) & ~np.isnan(b))
+        i, x, y = i.copy(), x.copy(), y.copy()
+        for arr in (i, x, y):
+            arr[same] = np.where(later, arr[same + 1], arr[same])
+        out[side] = (i[keep], x[keep], y[keep])
+    return group[keep], out
 
 
 class Envelope:
@@ -49,42 +68,39 @@ class Envelope:
         self.max_buckets = max(int(max_buckets), 1)
         self.size = 1  # samples per bucket
         self.seen = 0
-        # per extreme (min, max): bucket id (g,), sample index, x and y (g, k)
-        self.group: np.ndarray | None = None
-        self.ext: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        # bucket ids (g,) and per extreme (lo, hi): sample index, x and y (g, k)
+        self.group = np.zeros(0, dtype=np.int64)
+        self.ext: dict[str, tuple[np.ndarray, ...]] = {}
 
     def push(self, x: np.ndarray, y: np.ndarray) -> None:
         x = np.asarray(x, float)
         y = np.asarray(y, float).reshape(len(x), -1)
-        if not len(x):
+        m, size, s0 = len(x), self.size, self.seen
+        if not m:
             return
-        idx = self.seen + np.arange(len(x))
-        self.seen += len(x)
-        group = idx // self.size
-        new = (np.broadcast_to(idx[:, None], y.shape), np.broadcast_to(x[:, None], y.shape), y)
-        if self.group is not None:
-            group = np.concatenate([self.group, group])
-            parts = {s: tuple(np.concatenate([a, b]) for a, b in zip(self.ext[s], new,
-                                                                      strict=True))
-                     for s in ("lo", "hi")}
-        else:
-            parts = {"lo": new, "hi": new}
-        self._reduce(group, parts)
-        while self.group is not None and self.group.size > self.max_buckets:
+        self.seen += m
+        # a partial bucket at each end, whole buckets between (merged with the neighbours
+        # of the same bucket: the last one kept and the next block's first)
+        a = min(m, -s0 % size)
+        b = a + (m - a) // size * size
+        pieces = [(lo, hi, w) for lo, hi, w in ((0, a, a), (a, b, size), (b, m, m - b)) if hi > lo]
+        groups, ext = [self.group], {side: [v] for side, v in self.ext.items()}
+        for lo, hi, w in pieces:
+            groups.append((s0 + lo) // size + np.arange((hi - lo) // w))
+            for side in ("lo", "hi"):
+                ext.setdefault(side, []).append(
+                    _extremes(x[lo:hi], y[lo:hi], s0 + lo, w, side == "hi"))
+        group = np.concatenate(groups)
+        joined = {side: tuple(np.concatenate(v) for v in zip(*parts, strict=True))
+                  for side, parts in ext.items()}
+        self.group, self.ext = _merge_neighbours(group, joined)
+        while self.group.size > self.max_buckets:
             self.size *= 2
-            self._reduce(self.group // 2, self.ext)
-
-    def _reduce(self, group: np.ndarray, parts: dict) -> None:
-        for side in ("lo", "hi"):
-            i, x, y = parts[side]
-            pick = _first_per_group(group, y, side == "hi")
-            cols = np.arange(y.shape[1])[None, :]
-            self.ext[side] = (i[pick, cols], x[pick, cols], y[pick, cols])
-        self.group = group[np.flatnonzero(np.r_[True, group[1:] != group[:-1]])]
+            self.group, self.ext = _merge_neighbours(self.group // 2, self.ext)
 
     def lines(self, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """x (m, k) and y (m, k): each column's extremes in the order of the samples."""
-        if self.group is None:
+        if not self.group.size:
             return np.zeros((0, k)), np.zeros((0, k))
         (i_lo, x_lo, y_lo), (i_hi, x_hi, y_hi) = self.ext["lo"], self.ext["hi"]
         if self.size == 1:  # every sample is its own bucket
