@@ -347,6 +347,8 @@ def report_figures(logs: list[Path], platform_path: Path, long_logs: list[tuple[
 
     res: dict[str, Any] = {"sample": {"fit": best(fits), "fit_report": best(fit_reports),
                                       "report": best(reports)}, "long": {}}
+    say("shipped sample: " + ", ".join(
+        f"{k} {'/'.join(f'{x:.1f}' for x in v['runs_s'])} s" for k, v in res["sample"].items()))
     for minutes, path in long_logs:
         cmd = [*ropod_sysid(), "fit", str(path), "--platform", str(platform_path), "--out",
                str(out / f"params_{minutes:g}min.json"), "--quiet"]
@@ -356,6 +358,8 @@ def report_figures(logs: list[Path], platform_path: Path, long_logs: list[tuple[
             f.append(run_measured(cmd))
             r.append(run_measured(rcmd))
         res["long"][f"{minutes:g}"] = {"fit": best(f), "fit_report": best(r)}
+        say(f"{minutes:g} min: fit {best(f)['wall_s']:.1f} s, {best(f)['max_rss_mb']:.0f} MB; "
+            f"fit --report {best(r)['wall_s']:.1f} s, {best(r)['max_rss_mb']:.0f} MB")
 
     def ratio(entry: dict[str, Any]) -> str:
         f, r = entry["fit"]["wall_s"], entry["fit_report"]["wall_s"]
