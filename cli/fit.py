@@ -193,13 +193,10 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         from ropod_sysid.report import read_comparison, write_fit_report
 
         compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
+    # with --report, the fit's pass also gathers what the report draws: no second reading
     result = fit_files(list(logs), platform, options, workers=workers,
-                       dask_address=dask_address, quiet=quiet)
+                       dask_address=dask_address, quiet=quiet, plots=report_path is not None)
     check_enough(result, logs)
-    loaded = None
-    if report_path is not None:
-        # the report plots every sample: it needs the logs in memory
-        loaded = pieces_of(logs, platform, split_gaps, options.span, options.row_step)
     write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
     validation = None
     if validate_logs and report_path is None:
@@ -208,7 +205,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
                                       dask_address=dask_address, row_step=options.row_step,
                                       quiet=quiet, split_gaps=split_gaps)
     if report_path is not None:
-        write_fit_report(result, loaded, report_path, compare=compare, compare_label=compare_label,
+        write_fit_report(result, None, report_path, compare=compare, compare_label=compare_label,
                          validation_logs=pieces_of(validate_logs, platform, split_gaps,
                                                    options.span, options.row_step))
         say(f"wrote {report_path}")

@@ -55,10 +55,11 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     pfile = read_parameter_file(params_path)
     compare = read_parameter_file(compare_path) if compare_path is not None else None
     file_span, _, row_step = fit_settings(pfile, params_path)
-    loaded = pieces_of(logs, platform, split_gaps, span or file_span, row_step)
     validation = pieces_of(validate_paths, platform, split_gaps, span or file_span, row_step)
-    result, notes = result_from_parameter_file(platform, loaded, pfile, span, where=params_path)
-    write_fit_report(result, loaded, out_path, compare=compare,
+    # each log streamed once: triangles and what the report draws
+    result, notes = result_from_parameter_file(platform, list(logs), pfile, span,
+                                               where=params_path, split_gaps=split_gaps)
+    write_fit_report(result, None, out_path, compare=compare,
                      compare_label=Path(compare_path).name if compare_path else None,
                      validation_logs=validation, params_source=params_path, notes=notes)
     if not quiet:

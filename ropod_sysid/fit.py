@@ -12,7 +12,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from ropod_sysid.solve import (
     solve,
     stack_triangles,
 )
+
+if TYPE_CHECKING:
+    from ropod_sysid.plotdata import LogPlot
 
 WeightRotation = Literal["auto", "none"] | float
 
@@ -78,6 +81,7 @@ class LogFit:
     rms: dict[str, float]
     notes: list[str]
     triangles: Triangles = field(repr=False)
+    plot: LogPlot | None = field(default=None, repr=False)  # what the report draws of it
 
 
 @dataclass
@@ -265,7 +269,8 @@ def mean_correlation(systems: Sequence[Triangles]) -> float:
     return sum(s.rows * s.correlation for s in systems) / rows if rows else 1.0
 
 
-Reduce = Callable[[float], list[tuple[str, Triangles, list[str]]]]
+# (delay, gather the report's plot data) -> per log: source, triangles, notes, plot data
+Reduce = Callable[[float, bool], list[tuple[str, Triangles, list[str], "LogPlot | None"]]]
 
 
 def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None = None,
@@ -284,12 +289,12 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
     if options.split_gaps:
         logs = [p for log in logs for p in usable_pieces(log, options.span, options.row_step)]
 
-    def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
+    def reduce(delay: float, _plot: bool) -> list[tuple[str, Triangles, list[str], None]]:
         out = []
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
-            out.append((log.source, triangles(model, pre, options.friction), pre.notes))
+            out.append((log.source, triangles(model, pre, options.friction), pre.notes, None))
         return out
 
     return _fit(reduce, platform, options)
@@ -298,7 +303,8 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
 def fit_files(paths: Sequence[str | Path], platform: Platform,
               options: FitOptions | None = None, workers: int | None = None,
               dask_address: str | None = None, chunk: int | None = None,
-              progress: Callable[[str], None] | None = None, quiet: bool = True) -> FitResult:
+              progress: Callable[[str], None] | None = None, quiet: bool = True,
+              plots: bool = False) -> FitResult:
     """Fit the dynamic parameters to log files, each read and reduced in chunks.
 
     Every log is streamed (:func:`ropod_sysid.stream.stream_log`: memory bounded by ``chunk``
@@ -308,7 +314,9 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     is reduced on a worker and only the triangles come back. ``input_delay="auto"`` streams the
     logs again for every delay it tries. A log listed twice is refused
     (:func:`ropod_sysid.io.check_distinct`); with ``options.split_gaps`` a log with gaps in
-    time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`).
+    time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`). With ``plots``
+    the last pass also gathers what the report draws of each log (:attr:`LogFit.plot`;
+    bounded size), so that a report needs no second reading of the logs.
     """
     from ropod_sysid.distributed import pool
     from ropod_sysid.stream import DEFAULT_CHUNK, check_source, piece_triangles
@@ -322,13 +330,14 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         check_source(p, platform)
     say = progress or (lambda _msg: None)
     with pool(workers, dask_address, quiet=quiet) as run:
-        def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
+        def reduce(delay: float, plot: bool) -> list[tuple[str, Triangles, list[str],
+                                                           LogPlot | None]]:
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
                 + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
             parts = run(piece_triangles, paths, platform=platform, span=options.span,
                         input_delay=delay, friction=options.friction,
                         chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step,
-                        split_gaps=options.split_gaps)
+                        split_gaps=options.split_gaps, plot=plot and plots)
             return [piece for pieces in parts for piece in pieces]
 
         return _fit(reduce, platform, options)
@@ -342,7 +351,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     delay = 0.0
     if options.input_delay == "auto":
         def cost(d: float) -> float:
-            sol, _ = fit_systems([tri for _, tri, _ in reduce(d)], names, options)
+            sol, _ = fit_systems([tri for _, tri, _, _ in reduce(d, False)], names, options)
             return sol.sigma2
 
         from scipy.optimize import minimize_scalar  # imported here: only the delay search
@@ -354,15 +363,15 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
         delay = float(res.x)
     else:
         delay = float(options.input_delay)
-    reduced = reduce(delay)
-    for source, tri, _ in reduced:
+    reduced = reduce(delay, True)
+    for source, tri, _, _ in reduced:
         if tri.torque_free():
             raise InputError(f"{source}: the motor currents are all zero, so there is no torque "
                              "to fit the parameters to; check the log's current columns")
-    systems = [tri for _, tri, _ in reduced]
+    systems = [tri for _, tri, _, _ in reduced]
     solution, weights = fit_systems(systems, names, options)
-    per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri)
-               for (source, tri, notes), w in zip(reduced, weights, strict=True)]
+    per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri, plot)
+               for (source, tri, notes, plot), w in zip(reduced, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log,
                        combined_rms(systems, solution.values), delay)
     if options.physical:

@@ -62,6 +62,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_from
 from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
+from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
     GRID_STEPS,
     Preprocessed,
@@ -123,6 +124,7 @@ class StreamResult:
     dt: float
     span_samples: int
     observer: ObserverStats | None = field(default=None, repr=False)
+    plot: LogPlot | None = field(default=None, repr=False)  # what the report draws
 
 
 # ---------------------------------------------------------------------------------------------
@@ -432,7 +434,7 @@ class _Blocks:
     def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
                  keep_series: bool, row_step: int | None = None, threaded: bool = True,
-                 ) -> None:
+                 plot: bool = False) -> None:
         self.platform = platform
         self.model = PlatformModel(platform)
         self.span = span
@@ -443,6 +445,7 @@ class _Blocks:
         self.source = source
         self.params = params
         self.keep_series = keep_series
+        self.gather = PlotGather() if plot else None
         self.parts: list[_Samples] = []
         self.g0 = 0  # index of the first buffered sample
         self.avail = 0  # samples received
@@ -581,6 +584,10 @@ class _Blocks:
         oa, ob = (0 if first else s), (r1 if last else e)
         if self.obs is not None:
             pa, pb = min(pa, oa), max(pb, ob)
+        if self.gather is not None:  # every sample once, as the observer sees them
+            jo, jp = slice(oa - r0, ob - r0), slice(oa - qa, ob - qa)
+            self.gather.push_samples(w.t[jo], q[jp], qd[jp], w.delta[jo],
+                                     self.platform.torque_constant * w.current[jo])
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
@@ -592,6 +599,9 @@ class _Blocks:
               last: bool) -> None:
         """The block's rows to its triangles, merged in order (and the observer's samples)."""
         a, b = row_system(self.model, pre, first, count, self.friction)
+        if self.gather is not None:
+            rows = first + self.grid.step * np.arange(count)
+            self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows])
         block = block_triangles(a, b, self.source)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
@@ -654,18 +664,24 @@ class _Run:
 
     def finish(self) -> StreamResult:
         notes = self.notes + self.grid.finish()
-        tri, obs, n = self.blocks.finish()
-        return StreamResult(self.name, tri, notes, n, self.blocks.dt, self.blocks.k, obs)
+        blocks = self.blocks
+        tri, obs, n = blocks.finish()
+        shown = None
+        if blocks.gather is not None:
+            shown = blocks.gather.result(self.raw, self.t1 - self.t0, bool(self.grid.has_pose),
+                                         blocks.dt, blocks.k, blocks.grid.step)
+        return StreamResult(self.name, tri, notes, n, blocks.dt, blocks.k, obs, shown)
 
 
 def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
           resample: bool, prefetch: bool, row_step: int | None, split_gaps: bool,
-          done: list[StreamResult | None], dropped: list[str]) -> None:
+          done: list[StreamResult | None], dropped: list[str], plot: bool = False) -> None:
     """One pass over a log; with ``split_gaps`` over each piece between its gaps as a log of
     its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
     pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
-    ``resample`` puts the first of the others on the uniform grid from its start."""
+    ``resample`` puts the first of the others on the uniform grid from its start; ``plot``
+    gathers what the report draws of each piece."""
     name = source_name(source)
     restart = len(done)  # the piece the pass restarts at
     chunks = iter_chunks(source, platform, chunk, "allow" if split_gaps else "error")
@@ -703,7 +719,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
                     run = None
                 if run is None:
                     blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params,
-                                     keep_series, row_step, threaded=prefetch)
+                                     keep_series, row_step, threaded=prefetch, plot=plot)
                     run = _Run(name, log.piece, first, resample and log.piece == restart,
                                blocks)
                 run.push(log)
@@ -720,13 +736,13 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
                   input_delay: float = 0.0, friction: Friction = "per-wheel",
                   chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                   keep_series: bool = False, prefetch: bool = True,
-                  row_step: int | None = None, split_gaps: bool = False,
+                  row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
                   ) -> list[StreamResult]:
     """:func:`stream_log`; with ``split_gaps`` a log with gaps in time
     (:mod:`ropod_sysid.io.timebase`) gives one result per piece between them, each a log of
     its own (its grid, its smoother ends), named ``run.csv[2]`` …; a piece too short for the
     smoother span is left out with a note (on the first piece kept); none left is an error.
-    Without ``split_gaps`` a gap is an error."""
+    Without ``split_gaps`` a gap is an error. ``plot``: see :func:`stream_log`."""
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
@@ -738,7 +754,8 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
         while True:
             try:
                 _pass(source, platform, span, input_delay, friction, chunk, params,
-                      keep_series, resample, prefetch, row_step, split_gaps, done, dropped)
+                      keep_series, resample, prefetch, row_step, split_gaps, done, dropped,
+                      plot)
                 break
             except _OffGrid:
                 # a step off the grid after the head: the log (piece) is jittered after all;
@@ -755,18 +772,19 @@ def stream_log(source: Source, platform: Platform, span: Span | None = None,
                input_delay: float = 0.0, friction: Friction = "per-wheel",
                chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                keep_series: bool = False, prefetch: bool = True,
-               row_step: int | None = None) -> StreamResult:
+               row_step: int | None = None, plot: bool = False) -> StreamResult:
     """One pass over a log (a file, or an in-memory :class:`Log`) in chunks of ``chunk``
     samples: its QR triangles per DOF, equal to ``triangles(model, preprocess(log, …))`` to
     rounding; with ``params`` also the disturbance observer's figures (``keep_series``: and
     its low-passed series, O(N) memory). ``row_step``: samples between equation rows
-    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span).
+    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span). ``plot``:
+    also gather what the report draws (:class:`ropod_sysid.plotdata.LogPlot`, bounded size).
 
     ``prefetch`` reads the next chunk in a background thread while one is processed, and
     reduces a block's rows in another while the next block is smoothed.
     """
     return stream_pieces(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, prefetch, row_step)[0]
+                         keep_series, prefetch, row_step, plot=plot)[0]
 
 
 def log_triangles(source: Source, platform: Platform, span: Span | None = None,
@@ -781,12 +799,14 @@ def log_triangles(source: Source, platform: Platform, span: Span | None = None,
 def piece_triangles(source: Source, platform: Platform, span: Span | None = None,
                     input_delay: float = 0.0, friction: Friction = "per-wheel",
                     chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
-                    split_gaps: bool = False) -> list[tuple[str, Triangles, list[str]]]:
-    """(name, triangles, reading notes) of a log, or of each of its pieces with ``split_gaps``
-    (:func:`stream_pieces`): the unit of work of a fit, run on Dask workers."""
-    return [(r.source, r.triangles, r.notes)
+                    split_gaps: bool = False, plot: bool = False,
+                    ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
+    """(name, triangles, reading notes, plot data) of a log, or of each of its pieces with
+    ``split_gaps`` (:func:`stream_pieces`): the unit of work of a fit, run on Dask workers.
+    ``plot``: also what the report draws (bounded size), else None."""
+    return [(r.source, r.triangles, r.notes, r.plot)
             for r in stream_pieces(source, platform, span, input_delay, friction, chunk,
-                                   row_step=row_step, split_gaps=split_gaps)]
+                                   row_step=row_step, split_gaps=split_gaps, plot=plot)]
 
 
 def validate_source(source: Source, platform: Platform, params: DynamicParameters,

@@ -10,8 +10,12 @@ A report needs a :class:`~ropod_sysid.fit.FitResult`. Without refitting, one is 
 parameter file by :func:`result_from_parameter_file`: the file's values and standard deviations,
 with the residuals, singular values, rank and null space of the given logs.
 
-What is computed always uses every sample; only what is plotted is decimated
-(:mod:`ropod_sysid.report.figures`).
+What is computed (parameters, RMS per log and DOF, singular values) always uses every row, from
+the logs' triangles; what is plotted is gathered while each log streams, in bounded memory
+(:mod:`ropod_sysid.plotdata`: min/max envelopes of the inputs, every s-th equation row for the
+fit, its error, histograms and the error against velocity) and decimated for drawing
+(:mod:`ropod_sysid.report.figures`). A log is read once, by the fit or by
+:func:`result_from_parameter_file`.
 """
 
 from __future__ import annotations
@@ -38,10 +42,10 @@ from ropod_sysid.fit import (
     mean_correlation,
     parameters_of,
 )
+from ropod_sysid.io import check_distinct
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
-from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
     UNITS_OF,
@@ -49,9 +53,10 @@ from ropod_sysid.params import (
     parameter_names,
 )
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, preprocess, system, triangles
+from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
 from ropod_sysid.solve import combined_rms
+from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import difference, identifiability_verdict, implausible, relative_std
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
 
@@ -65,9 +70,9 @@ WEAK_RELATIVE_STD = 0.2  # the summary's threshold for "weakly determined"
 # a FitResult from a parameter file (no refit)
 
 
-def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: ParameterFile,
+def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile: ParameterFile,
                                span: Span | None = None, where: str = "<parameters>",
-                               ) -> tuple[FitResult, list[str]]:
+                               split_gaps: bool = False) -> tuple[FitResult, list[str]]:
     """What a report needs, from a parameter file and logs, without refitting.
 
     The values and standard deviations are the file's; the per-log and total residual RMS are
@@ -75,6 +80,10 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     space are those of the weighted stacked regressor of ``logs`` (the least-squares solution
     of these logs is computed for that, but its values are not shown). The friction model,
     span (unless ``span`` is given), input delay and fixed parameters come from the file.
+
+    ``logs`` are in-memory logs or log files; each is streamed once (:mod:`ropod_sysid.stream`),
+    gathering also what the report draws of it (:attr:`LogFit.plot`); with ``split_gaps`` each
+    piece between gaps in time is a log of its own (:func:`ropod_sysid.stream.stream_pieces`).
 
     The file is checked first (:func:`ropod_sysid.fit.parameters_of`). Returns the result and
     notes for the reader (e.g. that the values are those of a bounded fit).
@@ -96,13 +105,13 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
                          row_step=row_step)
 
-    model = PlatformModel(platform)
-    systems = []
-    log_notes = []
+    check_distinct([log for log in logs if not isinstance(log, Log)])
     for log in logs:
-        pre = preprocess(log, platform, span, delay, row_step)
-        log_notes.append(pre.notes)
-        systems.append(triangles(model, pre, friction))
+        check_source(log, platform)
+    streamed = [res for log in logs
+                for res in stream_pieces(log, platform, span, delay, friction,
+                                         row_step=row_step, split_gaps=split_gaps, plot=True)]
+    systems = [res.triangles for res in streamed]
     sol, weights = fit_systems(systems, names, options)
 
     m = np.array([values.get(k, 0.0) for k in names])
@@ -119,8 +128,8 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
             combinations[k] = f"{sol.combinations.get(k, '')} (with these logs)"
     solution = dataclasses.replace(sol, values=m, std=std, combination=combination,
                                    combinations=combinations, fixed=fixed)
-    per_log = [LogFit(log.source, s.samples, w, s.rms(m), n, s)
-               for log, s, w, n in zip(logs, systems, weights, log_notes, strict=True)]
+    per_log = [LogFit(res.source, res.triangles.samples, w, res.triangles.rms(m), res.notes,
+                      res.triangles, res.plot) for res, w in zip(streamed, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log, combined_rms(systems, m), delay)
     if pfile.extras.get("physical") is True:
         notes.append("the values are those of a physically consistent (bounded) fit")
@@ -192,58 +201,50 @@ def _verdict_class(text: str) -> str:
     return "warn"
 
 
-def _dof_rms(err: np.ndarray) -> dict[str, float]:
-    if err.shape[0] == 0:
-        return {k: float("nan") for k in ("x", "y", "theta", "translation", "rotation")}
-    ms = np.mean(err**2, axis=0)
-    return {"x": float(np.sqrt(ms[0])), "y": float(np.sqrt(ms[1])),
-            "theta": float(np.sqrt(ms[2])), "translation": float(np.sqrt(0.5 * (ms[0] + ms[1]))),
-            "rotation": float(np.sqrt(ms[2]))}
-
-
-def _log_views(result: FitResult, logs: Sequence[Log], shown: np.ndarray,
+def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
                ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray]:
-    """Per log: the figures and numbers; all logs' errors and velocities stacked."""
+    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs.
+
+    The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
+    the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
+    fit's pass or, when the result has none, by one streamed pass over ``logs``.
+    """
     platform = result.platform
-    model = PlatformModel(platform)
-    friction = result.options.friction
+    opts = result.options
     views, errs, vels = [], [], []
-    for k, (log, lf) in enumerate(zip(logs, result.logs, strict=True)):
-        pre = preprocess(log, platform, result.options.span, result.input_delay,
-                         result.options.row_step)
-        kept = pre.row_samples()
-        b = np.empty((len(kept), 3))
-        fit = np.empty_like(b)
-        done = 0
-        for idx, a_blk, b_blk in system(model, pre, friction):  # bounded memory
-            rows = slice(done, done + len(idx))
-            done += len(idx)
-            b[rows] = b_blk
-            fit[rows] = a_blk @ shown
-        t = pre.t[kept]
-        err = b - fit
+    fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.unit_names)
+    for k, lf in enumerate(result.logs):
+        plot = lf.plot
+        if plot is None:
+            if logs is None:
+                raise InputError(f"{lf.source}: the fit kept no plot data; give the fit's logs")
+            res = stream_log(logs[k], platform, opts.span, result.input_delay, opts.friction,
+                             row_step=opts.row_step, plot=True)
+            plot = res.plot
+            assert plot is not None
+        fit = plot.a_rows @ shown
+        err = plot.b_rows - fit
         errs.append(err)
-        vels.append(pre.qd[kept])
-        pose = pre.q
+        vels.append(plot.qd_rows)
+        rms = lf.triangles.rms(shown)
         views.append({
             "index": k,
             "id": f"log-{k + 1}",
             "source": lf.source,
             "name": _short(lf.source),
-            "samples": int(err.shape[0]),
-            "raw_samples": log.n_samples,
-            "duration": log.duration,
-            "rate": 1.0 / pre.dt if pre.dt > 0 else float("nan"),
+            "samples": lf.triangles.rows,
+            "raw_samples": plot.samples,
+            "duration": plot.duration,
+            "rate": 1.0 / plot.dt if plot.dt > 0 else float("nan"),
             "weight": lf.weight,
-            "rms": _dof_rms(err),
+            "rms": rms,
             "notes": list(lf.notes),
-            "span_samples": pre.span_samples,
-            "row_step": pre.grid.step,
-            "fig13": _png_uri(figures.fit_vs_measured(t, b, fit)),
-            "inputs": _png_uri(figures.inputs(
-                log.t, pose, pre.t, pre.qd, np.unwrap(log.delta, axis=0),
-                platform.torque_constant * log.current, platform.unit_names)),
-            "pose_source": "tracker (x_b, y_b, θ_b columns)" if log.pose is not None
+            "span_samples": plot.span_samples,
+            "row_step": plot.row_step,
+            "fig13": _png_uri(fit_figure.render(plot.t_rows, plot.b_rows, fit,
+                                                [rms["x"], rms["y"], rms["theta"]])),
+            "inputs": _png_uri(inputs_figure.render(plot)),
+            "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
@@ -288,7 +289,7 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
     return rows, only_other
 
 
-def render_fit_report(result: FitResult, logs: Sequence[Log], *,
+def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *,
                       compare: str | Path | ParameterFile | None = None,
                       compare_label: str | None = None,
                       validation_logs: Sequence[Log] | None = None,
@@ -297,12 +298,16 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
                       title: str | None = None) -> str:
     """The report of ``result`` on ``logs`` (the fit's logs, in the fit's order) as HTML.
 
+    ``logs`` (in-memory logs or files) are streamed once for the figures only when the result
+    carries no plot data (:attr:`ropod_sysid.fit.LogFit.plot`: ``fit_files(..., plots=True)``
+    and :func:`result_from_parameter_file` gather it); otherwise they may be None.
+
     compare : a parameter file (path or read) shown side by side with the differences
     validation_logs : logs the fit was not fitted on: residual RMS and disturbance observer
     params_source : where the values come from when the result was rebuilt from a file
     notes : further remarks for the reader (shown in the summary)
     """
-    if len(logs) != len(result.logs):
+    if logs is not None and len(logs) != len(result.logs):
         raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
                          f"{len(logs)}")
     compare_pf, compare_label = read_comparison(compare, compare_label, result.platform.unit_names)
@@ -404,7 +409,7 @@ def read_comparison(compare: str | Path | ParameterFile | None, label: str | Non
     return pfile, label or Path(compare).name
 
 
-def write_fit_report(result: FitResult, logs: Sequence[Log], path: str | Path, *,
+def write_fit_report(result: FitResult, logs: Sequence[Source] | None, path: str | Path, *,
                      compare: str | Path | ParameterFile | None = None,
                      validation_logs: Sequence[Log] | None = None,
                      **options: Any) -> None:
