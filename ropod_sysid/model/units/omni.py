@@ -65,7 +65,7 @@ import numpy as np
 from ropod_sysid.errors import InputError
 from ropod_sysid.model import base
 from ropod_sysid.model.units import Channel, FrictionVariant
-from ropod_sysid.platform import _number
+from ropod_sysid.platform import UNIT_NAME, _number
 
 BODY_FRICTION = ("fbv_x", "fbv_y", "fbv_w", "fbc_x", "fbc_y", "fbc_w")
 
@@ -95,6 +95,12 @@ class OmniData:
     def b_tau(self) -> np.ndarray:
         """B_τ = [J_1ᵀ … J_kᵀ] (O3); shape (N, 3, k)."""
         return np.swapaxes(self.jac, 1, 2)
+
+
+def _variant(variant: str) -> str:
+    if variant not in ("per-wheel", "shared", "body"):
+        raise InputError(f"unknown friction model {variant!r}; use per-wheel, shared or body")
+    return variant
 
 
 def _entry_number(entry: Mapping[str, Any], key: str, where: str, default: float | None,
@@ -140,6 +146,9 @@ class OmniUnits:
             raise InputError(f"{where}: 'units[{k}]' must be a mapping like {{name: \"1\", "
                              "type: omni, position: [x, y], heading: a}")
         name = str(entry["name"])
+        if not UNIT_NAME.match(name):
+            raise InputError(f"{where}: 'units[{k}].name' is {name!r}; use letters, digits and "
+                             "underscores only")
         at = f"{where}: 'units[{k}]' (unit '{name}')"
         unknown = sorted(set(map(str, entry)) - set(cls.entry_keys))
         if unknown:
@@ -174,6 +183,11 @@ class OmniUnits:
                  if isinstance(e, Mapping) and e.get("type") == cls.type_name]
         if not specs:
             raise InputError(f"{where}: no unit has 'type: omni'")
+        names = [s.name for s in specs]
+        for name in names:
+            if names.count(name) > 1:
+                raise InputError(f"{where}: unit name {name!r} is used twice; names must be "
+                                 "unique")
         return cls(specs, alpha)
 
     @staticmethod
@@ -186,12 +200,10 @@ class OmniUnits:
     def friction_names(units: Sequence[str], variant: FrictionVariant = "per-wheel"
                        ) -> list[str]:
         """Friction parameter names, ordered as :meth:`friction_columns`."""
-        if variant == "shared":
+        if _variant(variant) == "shared":
             return ["fov", "foc"]
         if variant == "body":
             return list(BODY_FRICTION)
-        if variant != "per-wheel":
-            raise InputError(f"unknown friction model {variant!r}; use per-wheel, shared or body")
         return [n for u in units for n in (f"fov_{u}", f"foc_{u}")]
 
     # ------------------------------------------------------------ kinematics
@@ -229,7 +241,8 @@ class OmniUnits:
         """Rows A (N, k, 3), b (N, k) with A q̇_b = b from measured φ̇ (N, k) (O1, in m/s).
 
         Each row is the rim-speed equation r_i φ̇_i = H_iᵀ ṙ + c_i θ̇; wheel odometry stacks
-        the rows of every unit and solves them by least squares.
+        the rows of every unit and solves them by least squares. With θ = 0 in ``q`` the rows
+        are those of the base-frame twist (v, v_n, ω) (004 eq. 2).
         """
         ch, sh = self._world_headings(q)
         a = np.empty((*ch.shape, 3))
@@ -266,7 +279,7 @@ class OmniUnits:
 
         Missing coefficients are zero; with ``body`` friction the wheels have none.
         """
-        if variant == "body":
+        if _variant(variant) == "body":
             return np.zeros_like(data.wheel_rate)
         if variant == "shared":
             fov = np.full(self.n_units, float(params.get("fov", 0.0)))
@@ -284,14 +297,13 @@ class OmniUnits:
         Wheel friction: −B_τ,i [φ̇_i, tanh(α φ̇_i)] (per wheel) or their sums (shared); body
         friction: :func:`body_friction_columns`.
         """
-        if variant == "body":
+        if _variant(variant) == "body":
             return body_friction_columns(data.theta, data.qd, self.alpha)
         phid = data.wheel_rate
         a_f = np.stack([phid, np.tanh(self.alpha * phid)], axis=-1)  # (N, k, 2)
         cols = -data.b_tau[..., None] * a_f[:, None]  # (N, 3, k, 2)
         if variant == "shared":
             return cols.sum(axis=2)
-        self.friction_names(self.names, variant)  # validates the variant
         return cols.reshape(cols.shape[0], 3, -1)
 
     def kinetic_energy(self, data: OmniData, params: Mapping[str, float]) -> np.ndarray:
