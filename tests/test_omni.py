@@ -319,6 +319,34 @@ def test_rotating_frame_coupling_that_eqs6_8_omit() -> None:
     assert np.abs(paper[:, :2]).max() < 2 * miss.max()
 
 
+@pytest.mark.parametrize("make", PLATFORMS.values(), ids=PLATFORMS.keys())
+def test_world_model_equals_robot_frame_newton_euler_with_spinning_wheels(make) -> None:
+    """A third derivation of M_add and b_dir: in the robot frame ν = (v, v_n, ω) the wheel rates
+    φ̇ = J_b ν have constant coefficients J_b = [h_i, c_i]/r_i, so the wheels add J_rot J_bᵀ J_b ν̇
+    and nothing else; only the base carries the rotating-frame term M ω S (v, v_n)."""
+    units = make()
+    params = {"m_b": M, "Jzz_b": J, "Jrot_o": 4e-4} | PAPER_BODY
+    q, qd, _ = states(15, seed=12)
+    tau = np.random.default_rng(13).normal(size=(15, units.n_units)) * 0.05
+    qdd = forward(units, q, qd, params, tau, "body")
+    nu = np.column_stack([np.einsum("nba,nb->na", rot(q[:, 2]), qd[:, :2]), qd[:, 2]])
+    j_b = units.kinematics(np.zeros_like(q), nu).jac[0]  # (k, 3), θ = 0: the robot frame
+    phid = np.einsum("kc,nc->nk", j_b, nu)
+    tau_f = units.friction_torques(units.kinematics(q, qd), params, "body")  # none: body axis
+    a = units.alpha
+    f_body = (np.array([params[n] for n in BODY_FRICTION[:3]]) * nu
+              + np.array([params[n] for n in BODY_FRICTION[3:]]) * np.tanh(a * nu))
+    coupling = np.column_stack([-M * nu[:, 2] * nu[:, 1], M * nu[:, 2] * nu[:, 0], np.zeros(15)])
+    lhs = np.diag([M, M, J]) + params["Jrot_o"] * j_b.T @ j_b
+    rhs = np.einsum("kc,nk->nc", j_b, tau + tau_f) + f_body - coupling
+    nud = np.linalg.solve(lhs, rhs.T).T
+    expect_xy = np.einsum("nab,nb->na", rot(q[:, 2]), nud[:, :2] + nu[:, 2:3] * np.column_stack(
+        [-nu[:, 1], nu[:, 0]]))  # r̈ = R(θ) (ν̇ + ω S ν)
+    np.testing.assert_allclose(qdd[:, :2], expect_xy, atol=1e-11)
+    np.testing.assert_allclose(qdd[:, 2], nud[:, 2], atol=1e-11)
+    np.testing.assert_allclose(units.actuator_rates(q, qd), phid, atol=1e-12)
+
+
 # ------------------------------------------------------------------ identification
 @pytest.mark.parametrize("variant", ["per-wheel", "shared", "body"])
 @pytest.mark.parametrize("make", PLATFORMS.values(), ids=PLATFORMS.keys())
