@@ -420,7 +420,7 @@ def test_per_unit_overrides_of_radius_and_torque_constant() -> None:
     ({"heading": None}, "p.yaml: 'units[1]' (unit '1'): missing key 'heading'; give the rolling "
      "direction in the base frame [rad]"),
     ({"heading": "north"}, "p.yaml: 'units[1]' (unit '1'): key 'heading' must be a number, got "
-     "'north'"),
+     "'north'; write a plain number in SI units (e.g. 0.05 or 5e-2)"),
     ({"heading": float("inf")}, "p.yaml: 'units[1]' (unit '1'): key 'heading' must be finite, "
      "got inf"),
     ({"wheel_radius": -0.03}, "p.yaml: 'units[1]' (unit '1'): key 'wheel_radius' must be > 0, "
