@@ -422,11 +422,11 @@ def test_per_unit_overrides_of_radius_and_torque_constant() -> None:
     ({"heading": "north"}, "p.yaml: 'units[1]' (unit '1'): key 'heading' must be a number, got "
      "'north'; write a plain number in SI units (e.g. 0.05 or 5e-2)"),
     ({"heading": float("inf")}, "p.yaml: 'units[1]' (unit '1'): key 'heading' must be finite, "
-     "got inf"),
+     "got inf; give its value in SI units"),
     ({"wheel_radius": -0.03}, "p.yaml: 'units[1]' (unit '1'): key 'wheel_radius' must be > 0, "
      "got -0.03"),
     ({"torque_constant": True}, "p.yaml: 'units[1]' (unit '1'): key 'torque_constant' must be a "
-     "number, got True"),
+     "number, got True; write a plain number in SI units (e.g. 0.05 or 5e-2)"),
     ({"pivot": [0, 0]}, "p.yaml: 'units[1]' (unit '1'): unknown key 'pivot' for type omni; "
      "known keys: name, type, position, heading, wheel_radius, torque_constant"),
 ])
