@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import click
 
 from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
-from ropod_sysid.io import LOG_SUFFIXES, read_log
+from ropod_sysid.io import log_format, read_log
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.io.mcaplog import write_mcap_log
 from ropod_sysid.io.smartwheel import write_smartwheel
@@ -31,13 +30,14 @@ from ropod_sysid.platform import load_platform
 @writes(outputs={"out_path": "OUT"}, inputs={"in_path": "IN", "platform_path": "--platform"})
 def command(in_path: str, out_path: str, platform_path: str, encoding: str | None, layout: str,
             quiet: bool) -> None:
-    """Convert log IN to OUT (.csv or .mcap); the input layout is recognised by itself.
+    """Convert log IN to OUT (.csv, .csv.gz or .mcap); the input layout is recognised by itself.
 
     OUT is written atomically; reading notes (dropped frames, damage) are printed.
     """
-    suffix = Path(out_path).suffix.lower()
-    if suffix not in LOG_SUFFIXES:
-        raise InputError(f"{out_path}: unknown log format '{suffix}'; use .csv or .mcap")
+    suffix = log_format(out_path)  # .csv for .csv and .csv.gz
+    if layout == "smartwheel" and out_path.lower().endswith(".gz"):
+        raise InputError(f"{out_path}: the smart-wheel layout is written as .csv or .mcap, "
+                         "not compressed; give a .csv or .mcap name")
     if encoding is not None and suffix != ".mcap":
         raise InputError(f"--encoding {encoding}: applies to .mcap output only, not {out_path}")
     platform = load_platform(platform_path)

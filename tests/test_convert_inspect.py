@@ -185,3 +185,19 @@ def test_damaged_input_converts_with_a_warning(files, tmp_path):
     assert len(warn) == 1 and "truncated" in warn[0] and "recovered the" in warn[0]
     n = int(warn[0].split("recovered the ")[1].split()[0])
     assert len((tmp_path / "cut.csv").read_text().splitlines()) == n + 1
+
+
+def test_convert_writes_gzip_compressed_csv(files):
+    d = files
+    pf = d / "platform.yaml"
+    ok(run("convert", d / "run.csv", d / "a.mcap", "--platform", pf))
+    ok(run("convert", d / "a.mcap", d / "back.csv.gz", "--platform", pf))
+    import gzip
+
+    assert gzip.decompress((d / "back.csv.gz").read_bytes()) == (d / "run.csv").read_bytes()
+    one_line_error(run("convert", d / "run.csv", d / "sw.csv.gz", "--platform", pf,
+                       "--layout", "smartwheel"),
+                   "the smart-wheel layout is written as .csv or .mcap")
+    one_line_error(run("convert", d / "run.csv", d / "x.txt", "--platform", pf),
+                   "unknown log format '.txt'")
+    assert not (d / "sw.csv.gz").exists() and not (d / "x.txt").exists()
