@@ -232,3 +232,14 @@ def test_simulate_from_the_shipped_trajectory(tmp_path):
     log = read_log(out, platform)
     assert log.n_samples == 401 and log.units == ["1", "2", "3", "4"]
     assert np.abs(log.phi[-1]).max() > 0.1 or np.abs(log.delta[-1]).max() > 0.1
+
+
+def test_a_missing_trajectory_is_named_as_a_file_not_a_log(files, tmp_path):
+    d, _ = files
+    r = run("simulate", "--platform", str(d / "platform.yaml"), "--params", str(d / "truth.json"),
+            "--trajectory", str(tmp_path / "nope.csv"), "--out", str(tmp_path / "run.csv"))
+    one_line_error(r, f"{tmp_path / 'nope.csv'}: no such file; check the path")
+    r = run("trajectory", "check", str(tmp_path / "nope.csv"), "--platform",
+            str(d / "platform.yaml"))
+    one_line_error(r, f"{tmp_path / 'nope.csv'}: no such file; check the path")
+    assert not (tmp_path / "run.csv").exists()

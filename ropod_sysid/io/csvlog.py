@@ -220,6 +220,8 @@ def read_numeric_table(path: str | Path, required: list[str], optional: Sequence
     """
     where = str(path)
     path = Path(path)
+    if not path.exists():  # the log reader's messages speak of a log
+        raise InputError(f"{where}: no such file; check the path")
     names = [h.strip() for h in _read_header(path, where)]
     seen: dict[str, int] = {}
     for k, name in enumerate(names):
