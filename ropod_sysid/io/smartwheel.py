@@ -60,7 +60,7 @@ import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
-from ropod_sysid.io.log import Log
+from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.platform import Platform
 
 SW_TOPIC = "/sw_ethercat_parser/data"
@@ -233,29 +233,6 @@ def _first_frame_problem(exc: BaseException, m: Any, n: int, platform: Platform,
             f"({' '.join(str(exc).split())[:80]}); fix the recording")
 
 
-def _monotonic(ts: np.ndarray) -> np.ndarray:
-    """Frames of a clock to keep: each after the last kept one, and no forward spikes."""
-    n = ts.shape[0]
-    keep = np.ones(n, dtype=bool)
-    if n < 2 or bool(np.all(ts[1:] > ts[:-1])):
-        return keep
-    v = ts.tolist()
-    last: int | None = None
-    for k in range(n):
-        cur = v[k]
-        if last is not None and cur <= last:
-            keep[k] = False
-            continue
-        nxt = v[k + 1] if k + 1 < n else None
-        # a forward spike: the next frame is back before this one but after the last kept
-        if nxt is not None and nxt <= cur and (last is None or nxt > last) and \
-                (last is not None or k + 2 >= n or v[k + 2] > nxt):
-            keep[k] = False
-            continue
-        last = cur
-    return keep
-
-
 def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | None = None, *,
                   voltage_range: tuple[float, float] = VOLTAGE_RANGE,
                   warn: bool = True) -> Log:
@@ -264,77 +241,16 @@ def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | Non
     Corrupt frames are dropped (see the module description) and reported in ``Log.notes`` (and
     as a warning when ``warn``). Raises :class:`InputError` when fewer than 3 frames remain.
     """
+    from ropod_sysid.io.swframes import FrameChecks
+
     where = where or frames.source
-    ts = frames.sensor_ts
-    v = frames.values
-    n_frames = frames.n_frames
-    floats = np.stack([v[f] for f in REQUIRED_FLOATS])                 # (F, N, n)
-    reasons: list[tuple[str, np.ndarray]] = []
-    bad = frames.malformed.copy()
-    reasons.append(("malformed (missing fields or sensors)", frames.malformed.copy()))
-    zeroed = ((ts == 0) | np.all(floats == 0.0, axis=0)).any(axis=1) & ~bad
-    reasons.append(("zeroed", zeroed))
-    bad |= zeroed
-    nonfinite = ~np.isfinite(floats).all(axis=(0, 2)) & ~bad
-    reasons.append(("with NaN or infinite values", nonfinite))
-    bad |= nonfinite
-    lo, hi = voltage_range
-    vb = v["voltage_bus"]
-    volt = ~((vb >= lo) & (vb <= hi)).all(axis=1) & ~bad
-    reasons.append((f"with voltage_bus outside [{lo:g}, {hi:g}] V", volt))
-    bad |= volt
-    good = np.flatnonzero(~bad)
-    mono = np.ones(good.size, dtype=bool)
-    for i in range(ts.shape[1]):
-        mono &= _monotonic(ts[good, i])
-    nonmono = np.zeros(n_frames, dtype=bool)
-    nonmono[good[~mono]] = True
-    reasons.append(("with non-monotonic sensor_ts", nonmono))
-    bad |= nonmono
-    keep = np.flatnonzero(~bad)
-    if keep.size < MIN_SAMPLES:
-        raise InputError(
-            f"{where}: only {keep.size} of {n_frames} smart-wheel frames are usable (the others "
-            "are zeroed, out of range or out of order); at least "
-            f"{MIN_SAMPLES} samples are needed")
-
-    ts0 = ts[keep, 0]
-    rel_ns = (ts0 - ts0[0]).astype(np.int64)      # integer subtraction first, then seconds
-    t = rel_ns.astype(np.float64) / 1e9
-
-    n = platform.n_units
-    delta = np.empty((keep.size, n))
-    phi = np.empty((keep.size, n, 2))
-    cur = np.empty((keep.size, n, 2))
-    for i, u in enumerate(platform.units):
-        lm, rm = u.left_motor, 3 - u.left_motor
-        enc_l, enc_r = v[f"encoder_{lm}"][keep, i], v[f"encoder_{rm}"][keep, i]
-        phi[:, i, 0] = u.sign_left * np.unwrap(enc_l)
-        phi[:, i, 1] = u.sign_right * np.unwrap(enc_r)
-        cur[:, i, 0] = u.sign_left * v[f"current_{lm}_q"][keep, i]
-        cur[:, i, 1] = u.sign_right * v[f"current_{rm}_q"][keep, i]
-        d = np.unwrap(v["encoder_pivot"][keep, i]) - u.pivot_offset
-        d -= _TWO_PI * math.floor((d[0] + math.pi) / _TWO_PI)
-        delta[:, i] = d
-
-    notes = list(frames.notes)
-    n_bad = int(bad.sum())
-    if n_bad:
-        t_all = np.interp(np.arange(n_frames), keep, t)    # time of each frame, by position
-        parts = []
-        for label, mask in reasons:
-            idx = np.flatnonzero(mask)
-            if idx.size:
-                shown = ", ".join(f"#{k} (t≈{t_all[k]:.3f} s)" for k in idx[:5])
-                more = f" and {idx.size - 5} more" if idx.size > 5 else ""
-                parts.append(f"{idx.size} {label}: frames {shown}{more}")
-        notes.append(f"{where}: dropped {n_bad} of {n_frames} smart-wheel frames — "
-                     f"{'; '.join(parts)} (frame numbers count from 0 in file order)")
+    checks = FrameChecks(platform, where, REQUIRED_FLOATS, voltage_range, frames.notes)
+    first = checks.push(frames.sensor_ts, frames.values, frames.malformed)
+    last, notes = checks.finish()
     if warn:
         for note in notes:
             warnings.warn(note, stacklevel=2)
-    return Log(t=t, units=platform.unit_names, delta=delta, phi=phi, current=cur, pose=None,
-               source=where, notes=notes)
+    return join_logs([p for p in (first, last) if p is not None], notes)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,229 @@
+"""Smart-wheel frames → contract samples, a piece of the recording at a time.
+
+:class:`FrameChecks` applies the checks and the conversion that
+:func:`ropod_sysid.io.smartwheel.frames_to_log` describes to consecutive pieces of the frames,
+carrying across pieces what they need: the last kept clock value of every unit and the last
+two good frames (a frame is judged non-monotonic from the two good frames after it), the
+first kept clock value (t counts from it), the unwrapping state of every encoder
+(:func:`ropod_sysid.odometry.unwrap_from`, bit-identical to one ``np.unwrap``), the pivot
+branch chosen at the first kept sample, and for the note the counts and the first frames of
+every reason with the kept frames around them. The samples equal those of the whole log bit
+for bit, and the note is the same.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.log import Log
+from ropod_sysid.odometry import unwrap_from
+from ropod_sysid.platform import Platform
+
+_TWO_PI = 2.0 * math.pi
+SHOWN = 5      # frames named per reason in the note
+
+
+@dataclass
+class _Held:
+    """Good frames whose monotonicity waits for the frames after them."""
+
+    index: np.ndarray      # (g,) frame numbers
+    ts: np.ndarray         # (g, n) uint64
+    floats: np.ndarray     # (F, g, n)
+
+
+def _monotonic(v: list[int], last: int | None, decide: int) -> tuple[list[bool], int | None]:
+    """Which of the first ``decide`` values of one unit's clock to keep — each after the last
+    kept one, and no forward spikes (a value that the next one falls back from, the next
+    still after the last kept one) — looking ahead at ``v[decide:]`` (two values, or none at
+    the end of the log); and the last kept value after them."""
+    n = len(v)
+    keep = [True] * decide
+    for k in range(decide):
+        cur = v[k]
+        if last is not None and cur <= last:
+            keep[k] = False
+            continue
+        nxt = v[k + 1] if k + 1 < n else None
+        if nxt is not None and nxt <= cur and (last is None or nxt > last) and \
+                (last is not None or k + 2 >= n or v[k + 2] > nxt):
+            keep[k] = False
+            continue
+        last = cur
+    return keep, last
+
+
+class FrameChecks:
+    """The checks and conversion of smart-wheel frames, piece by piece (:meth:`push`, then
+    :meth:`finish`)."""
+
+    def __init__(self, platform: Platform, where: str, fields: tuple[str, ...],
+                 voltage_range: tuple[float, float], notes: list[str] | None = None) -> None:
+        self.platform, self.where, self.fields = platform, where, fields
+        self.lo, self.hi = voltage_range
+        self.notes = list(notes or [])
+        n = platform.n_units
+        self.labels = ("malformed (missing fields or sensors)", "zeroed",
+                       "with NaN or infinite values",
+                       f"with voltage_bus outside [{self.lo:g}, {self.hi:g}] V",
+                       "with non-monotonic sensor_ts")
+        self.counts = [0] * len(self.labels)
+        self.shown: list[list[int]] = [[] for _ in self.labels]
+        self.times: dict[int, float] = {}           # shown frame → its time, once known
+        self.waiting: list[int] = []                # shown frames before the next kept one
+        self.last_kept: tuple[int, float] | None = None
+        self.first_kept: float | None = None
+        self.n_frames = 0
+        self.n_kept = 0
+        self.held = _Held(np.zeros(0, dtype=np.int64), np.zeros((0, n), dtype=np.uint64),
+                          np.zeros((len(fields), 0, n)))
+        self.last_ts: list[int | None] = [None] * n
+        self.ts0: np.uint64 | None = None
+        self.unwrap: dict[str, np.ndarray] = {}     # encoder → (last raw, correction) (2, n)
+        self.branch: np.ndarray | None = None
+
+    def _count(self, reason: int, frames: np.ndarray) -> None:
+        """Count the ``frames`` (numbers, ascending) dropped for ``reason``."""
+        self.counts[reason] += frames.size
+        room = SHOWN - len(self.shown[reason])
+        if room > 0 and frames.size:
+            new = frames[:room].tolist()
+            self.shown[reason] += new
+            self.waiting = sorted(self.waiting + new)
+
+    def push(self, ts: np.ndarray, values: dict[str, np.ndarray], malformed: np.ndarray,
+             final: bool = False) -> Log | None:
+        """Check the next frames (``ts`` (N, n) uint64, ``values`` field → (N, n), the
+        frames that were malformed); the samples of the frames decided so far, or None."""
+        start = self.n_frames
+        self.n_frames += ts.shape[0]
+        floats = np.stack([values[f] for f in self.fields])          # (F, N, n)
+        bad = malformed.copy()
+        self._count(0, np.flatnonzero(malformed) + start)
+        zeroed = ((ts == 0) | np.all(floats == 0.0, axis=0)).any(axis=1) & ~bad
+        self._count(1, np.flatnonzero(zeroed) + start)
+        bad |= zeroed
+        nonfinite = ~np.isfinite(floats).all(axis=(0, 2)) & ~bad
+        self._count(2, np.flatnonzero(nonfinite) + start)
+        bad |= nonfinite
+        vb = values["voltage_bus"]
+        volt = ~((vb >= self.lo) & (vb <= self.hi)).all(axis=1) & ~bad
+        self._count(3, np.flatnonzero(volt) + start)
+        bad |= volt
+        good = np.flatnonzero(~bad)
+        h = self.held
+        index = np.concatenate([h.index, good + start])
+        gts = np.concatenate([h.ts, ts[good]])
+        gfl = np.concatenate([h.floats, floats[:, good]], axis=1)
+        decide = index.size if final else max(index.size - 2, 0)
+        mono = np.ones(decide, dtype=bool)
+        for i in range(gts.shape[1]):
+            col = gts[:, i]
+            last = self.last_ts[i]
+            if bool(np.all(col[1:] > col[:-1])) and (last is None or col.size == 0
+                                                      or int(col[0]) > last):
+                if decide:
+                    self.last_ts[i] = int(col[decide - 1])
+                continue
+            keep, self.last_ts[i] = _monotonic(col.tolist(), last, decide)
+            mono &= np.array(keep, dtype=bool)
+        self._count(4, index[:decide][~mono])
+        self.held = _Held(index[decide:], gts[decide:], gfl[:, decide:])
+        kept = np.flatnonzero(mono)
+        return self._samples(index[kept], gts[kept], gfl[:, kept])
+
+    def _samples(self, index: np.ndarray, ts: np.ndarray, floats: np.ndarray) -> Log | None:
+        if index.size == 0:
+            return None
+        if self.ts0 is None:
+            self.ts0 = ts[0, 0]
+        rel_ns = (ts[:, 0] - self.ts0).astype(np.int64)  # integer subtraction, then seconds
+        t = rel_ns.astype(np.float64) / 1e9
+        self._resolve_times(index, t)
+        self.n_kept += index.size
+        v = dict(zip(self.fields, floats, strict=True))
+        n = self.platform.n_units
+        m = index.size
+        delta = np.empty((m, n))
+        phi = np.empty((m, n, 2))
+        cur = np.empty((m, n, 2))
+        enc = {name: self._unwrap(name, v[name]) for name in
+               ("encoder_1", "encoder_2", "encoder_pivot")}
+        if self.branch is None:
+            d0 = enc["encoder_pivot"][0] - np.array([u.pivot_offset for u in self.platform.units])
+            self.branch = np.array([_TWO_PI * math.floor((d + math.pi) / _TWO_PI) for d in d0])
+        for i, u in enumerate(self.platform.units):
+            lm, rm = u.left_motor, 3 - u.left_motor
+            phi[:, i, 0] = u.sign_left * enc[f"encoder_{lm}"][:, i]
+            phi[:, i, 1] = u.sign_right * enc[f"encoder_{rm}"][:, i]
+            cur[:, i, 0] = u.sign_left * v[f"current_{lm}_q"][:, i]
+            cur[:, i, 1] = u.sign_right * v[f"current_{rm}_q"][:, i]
+            d = enc["encoder_pivot"][:, i] - u.pivot_offset
+            d -= self.branch[i]
+            delta[:, i] = d
+        return Log(t=t, units=self.platform.unit_names, delta=delta, phi=phi, current=cur,
+                   pose=None, source=self.where)
+
+    def _unwrap(self, name: str, x: np.ndarray) -> np.ndarray:
+        """np.unwrap along the frames, continued from the previous piece."""
+        state = self.unwrap.get(name)
+        if state is None:
+            up, corr = unwrap_from(x)
+        else:
+            up, corr = unwrap_from(np.concatenate([state[:1], x]), state[1])
+            up, corr = up[1:], corr[1:]
+        self.unwrap[name] = np.stack([x[-1], corr[-1]])
+        return up
+
+    def _resolve_times(self, index: np.ndarray, t: np.ndarray) -> None:
+        """The times of shown frames, as np.interp over the kept frames by frame number
+        gives them, from the kept frames on either side."""
+        if self.first_kept is None:
+            self.first_kept = float(t[0])
+        rest = []
+        for s in self.waiting:
+            j = int(np.searchsorted(index, s))
+            if j == index.size:
+                rest.append(s)
+                continue
+            before = self.last_kept if j == 0 else (int(index[j - 1]), float(t[j - 1]))
+            if before is None:
+                self.times[s] = self.first_kept
+            else:
+                self.times[s] = float(np.interp(s, [before[0], int(index[j])],
+                                                [before[1], float(t[j])]))
+        self.waiting = rest
+        self.last_kept = (int(index[-1]), float(t[-1]))
+
+    def finish(self) -> tuple[Log | None, list[str]]:
+        """The samples of the held frames and the notes; raises :class:`InputError` when
+        fewer than 3 frames were usable."""
+        last = self.push(np.zeros((0, self.platform.n_units), dtype=np.uint64),
+                         {f: np.zeros((0, self.platform.n_units)) for f in self.fields},
+                         np.zeros(0, dtype=bool), final=True)
+        if self.n_kept < 3:
+            raise InputError(
+                f"{self.where}: only {self.n_kept} of {self.n_frames} smart-wheel frames are "
+                "usable (the others are zeroed, out of range or out of order); at least 3 "
+                "samples are needed")
+        for s in self.waiting:
+            self.times[s] = self.last_kept[1] if self.last_kept else 0.0
+        notes = list(self.notes)
+        n_bad = sum(self.counts)
+        if n_bad:
+            parts = []
+            for label, count, shown in zip(self.labels, self.counts, self.shown, strict=True):
+                if count:
+                    named = ", ".join(f"#{k} (t≈{self.times[k]:.3f} s)" for k in shown)
+                    more = f" and {count - SHOWN} more" if count > SHOWN else ""
+                    parts.append(f"{count} {label}: frames {named}{more}")
+            notes.append(f"{self.where}: dropped {n_bad} of {self.n_frames} smart-wheel frames "
+                         f"— {'; '.join(parts)} (frame numbers count from 0 in file order)")
+        return last, notes
+
+
+__all__ = ["FrameChecks"]
