@@ -165,8 +165,9 @@ def _ts_value(v: Any) -> int:
 
 
 def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
-                         encoding: str = "json") -> SmartWheelFrames:
-    """Raw frames from decoded smart-wheel messages (JSON dicts or ROS 2 objects)."""
+                         encoding: str = "json", offset: int = 0) -> SmartWheelFrames:
+    """Raw frames from decoded smart-wheel messages (JSON dicts or ROS 2 objects);
+    ``offset``: the number of the first of them in the file (message 0 is checked whole)."""
     n = platform.n_units
     n_frames = len(decoded)
     ts = np.zeros((n_frames, n), dtype=np.uint64)
@@ -197,17 +198,21 @@ def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
                 for j, name in enumerate(REQUIRED_FLOATS):
                     vals[j, k, i] = float(get(s, name))
         except (KeyError, AttributeError, IndexError, TypeError, ValueError) as exc:
-            if k == 0:
+            if offset + k == 0:
                 raise InputError(_first_frame_problem(exc, m, n, platform, where, sensors_of,
                                                       get)) from None
             malformed[k] = True
             ts[k] = 0
             vals[:, k] = 0.0
-        if k == 0 and len(sensors) > n:
-            notes.append(f"{where}: the smart-wheel data has {len(sensors)} sensors; the first "
-                         f"{n} are read as units {', '.join(platform.unit_names)}")
+        if offset + k == 0 and len(sensors) > n:
+            notes.append(extra_sensors_note(where, len(sensors), platform))
     return SmartWheelFrames(ts, dict(zip(REQUIRED_FLOATS, vals, strict=True)), malformed, where,
                             notes)
+
+
+def extra_sensors_note(where: str, count: int, platform: Platform) -> str:
+    return (f"{where}: the smart-wheel data has {count} sensors; the first "
+            f"{platform.n_units} are read as units {', '.join(platform.unit_names)}")
 
 
 def _first_frame_problem(exc: BaseException, m: Any, n: int, platform: Platform, where: str,
@@ -331,8 +336,7 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
             vals[name][:, k] = table.column(f"c{present[(k, name)]}").to_numpy()
     notes = []
     if count > n:
-        notes.append(f"{where}: the smart-wheel data has {count} sensors; the first {n} are "
-                     f"read as units {', '.join(platform.unit_names)}")
+        notes.append(extra_sensors_note(where, count, platform))
     frames = SmartWheelFrames(ts, vals, np.zeros(n_rows, dtype=bool), where, notes)
     return frames_to_log(frames, platform, where)
 

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.io.cdr import struct_array_layout
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.mcapdecode import BatchDecoder, Rows, ros2_decoder
 from ropod_sysid.odometry import unwrap_from
 from ropod_sysid.platform import Platform
 
@@ -226,4 +228,88 @@ class FrameChecks:
         return last, notes
 
 
-__all__ = ["FrameChecks"]
+# ---------------------------------------------------------------------------------------------
+# MCAP messages → frames
+
+_CDR_TYPES = {"uint8": (1, "u1"), "int8": (1, "i1"), "uint16": (2, "u2"), "int16": (2, "i2"),
+              "uint32": (4, "u4"), "int32": (4, "i4"), "uint64": (8, "u8"), "int64": (8, "i8"),
+              "float32": (4, "f4"), "float64": (8, "f8"), "bool": (1, "u1")}
+
+
+def sensor_fields(msgdef: str) -> list[tuple[str, int, str]] | None:
+    """The primitive fields (name, bytes, numpy type) of the sensor struct of a smart-wheel
+    ros2msg schema whose message is only ``X[] sensors``; None for any other shape."""
+    sections = [sec.strip().splitlines() for sec in msgdef.split("=" * 80)]
+
+    def fields(lines: list[str]) -> list[tuple[str, str]]:
+        out = []
+        for line in lines:
+            words = line.split("#", 1)[0].split()
+            if words and not line.startswith("MSG:"):
+                out.append((words[0], words[1] if len(words) > 1 else ""))
+        return out
+
+    top = fields(sections[0])
+    if len(sections) != 2 or len(top) != 1 or top[0][1] != "sensors" \
+            or not top[0][0].endswith("[]"):
+        return None
+    out = []
+    for kind, name in fields(sections[1]):
+        if kind not in _CDR_TYPES or "=" in name:
+            return None
+        out.append((name, *_CDR_TYPES[kind]))
+    return out
+
+
+def smartwheel_decoder(encoding: str, schema: object, topic: str, where: str) -> BatchDecoder:
+    """The batch decoder of a smart-wheel channel: JSON, or ROS 2 with the fixed layout of
+    its schema's sensor struct when it has one."""
+    from ropod_sysid.io.smartwheel import REQUIRED
+
+    if encoding == "json":
+        import json
+
+        return BatchDecoder("json", json.loads)
+    decode = ros2_decoder(schema, topic, where)
+    found = sensor_fields(schema.data.decode(errors="replace"))   # type: ignore[attr-defined]
+    names = {f for f, _, _ in found or []}
+
+    def layout_of(payload: bytes, msg: object) -> object:
+        if found is None or not set(REQUIRED) <= names or ("sensor_ts", 8, "u8") not in found:
+            return None
+        try:
+            items = list(msg.sensors)   # type: ignore[attr-defined]
+        except (AttributeError, TypeError):
+            return None
+        return struct_array_layout(payload, items, found, REQUIRED)
+
+    return BatchDecoder("ros2", decode, layout_of)
+
+
+def rows_to_frames(rows: Rows, decoder: BatchDecoder, platform: Platform, where: str,
+                   offset: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, list[str]]:
+    """(sensor_ts, values, malformed, notes) of decoded smart-wheel messages, as
+    :func:`ropod_sysid.io.smartwheel.frames_from_messages` gives them."""
+    from ropod_sysid.io.smartwheel import (
+        REQUIRED_FLOATS,
+        extra_sensors_note,
+        frames_from_messages,
+    )
+
+    n = platform.n_units
+    cols = rows.columns
+    if decoder.layout is not None and rows.fast is not None and rows.fast.all() \
+            and cols["sensor_ts"].shape[1] >= n:
+        count = cols["sensor_ts"].shape[1]
+        notes = [extra_sensors_note(where, count, platform)] if offset == 0 and count > n \
+            else []
+        values = {f: cols[f][:, :n].astype(np.float64) for f in REQUIRED_FLOATS}
+        return (np.ascontiguousarray(cols["sensor_ts"][:, :n], dtype=np.uint64), values,
+                np.zeros(len(rows), dtype=bool), notes)
+    decoded = rows.objects if decoder.encoding == "json" else \
+        [decoder.decode(p) for p in rows.payloads]
+    fr = frames_from_messages(decoded, platform, where, decoder.encoding, offset)
+    return fr.sensor_ts, fr.values, fr.malformed, fr.notes
+
+
+__all__ = ["FrameChecks", "rows_to_frames", "sensor_fields", "smartwheel_decoder"]
