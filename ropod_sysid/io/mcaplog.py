@@ -15,8 +15,11 @@ Floats are written exactly (JSON numbers in Python's shortest round-trip form, C
 CSV → MCAP → CSV gives the identical file. Chunks are small (64 KiB before compression) so that
 a damaged or truncated file loses little.
 
-Reading (:func:`read_mcap_log`) iterates the records in file order without seeking, so files
-without index or summary (a recording that was cut off) read too. It recognises our layout (JSON or
+Reading (:func:`read_mcap_log`, :func:`iter_mcap_log` in chunks) iterates the records in file
+order without seeking, so files without index or summary (a recording that was cut off) read
+too. A chunk of only messages is split into payloads without a record object per message
+(:class:`MessageRun`), and the payloads are decoded a batch at a time
+(:mod:`ropod_sysid.io.mcapdecode`). It recognises our layout (JSON or
 ROS 2) and the smart-wheel layout (:mod:`ropod_sysid.io.smartwheel`) by schema and topic names.
 Damage — truncation, a CRC mismatch, a broken compressed chunk, an unreadable record or message —
 stops reading there: what came before is kept with a warning (``warnings.warn`` and
