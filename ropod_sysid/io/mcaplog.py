@@ -44,7 +44,7 @@ from typing import IO, Any
 import numpy as np
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError, RecordLengthLimitExceeded
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
+from mcap.records import Channel, Chunk, DataEnd, Footer, Message, MessageIndex, Schema
 from mcap.stream_reader import (
     CRCValidationError,
     StreamReader,
@@ -249,6 +249,23 @@ class _Bounded:
         return data
 
 
+class _Reader(StreamReader):
+    """The ``mcap`` stream reader, but a message index (16 bytes per message, which we never
+    use) is passed over in one read instead of parsed entry by entry: the same bytes are
+    consumed (and CRC-checked), and a file that ends inside it ends there as well."""
+
+    def _read_record(self, opcode: int, length: int) -> Any:
+        if opcode != Opcode.MESSAGE_INDEX:
+            return super()._read_record(opcode, length)
+        stream = self._stream
+        channel_id = stream.read2()
+        size = stream.read4()
+        size += -size % 16                    # whole (timestamp, offset) entries, as read
+        if size and len(stream.read(size)) < size:
+            raise EndOfFile()
+        return MessageIndex(channel_id, [])
+
+
 def _open_binary(path: Path, where: str) -> IO[bytes]:
     try:
         return open(path, "rb")  # noqa: SIM115
@@ -275,12 +292,20 @@ def scan_mcap(path: str | Path, keep_messages: bool = True) -> McapScan:
 
 
 class MessageRun:
-    """The messages of a chunk, parsed only as far as their channels and payloads."""
+    """The messages of a chunk, parsed only as far as their channels and payloads (the
+    payloads of a chunk of equal records are cut when asked for)."""
 
-    __slots__ = ("channels", "data")
+    __slots__ = ("_cut", "_data", "channels")
 
-    def __init__(self, channels: list[int], data: list[bytes]) -> None:
-        self.channels, self.data = channels, data
+    def __init__(self, channels: list[int], data: list[bytes] | None = None,
+                 cut: Any = None) -> None:
+        self.channels, self._data, self._cut = channels, data, cut
+
+    @property
+    def data(self) -> list[bytes]:
+        if self._data is None:
+            self._data = self._cut()
+        return self._data
 
     def of(self, channel_id: int) -> list[bytes]:
         """The payloads on one channel."""
@@ -304,8 +329,8 @@ def _records(path: str | Path, scan: McapScan, light: bool = False) -> Iterator[
         if scan.size == 0:
             raise InputError(f"{where}: the file is empty; an MCAP log was expected")
         src = _Bounded(f, scan.size)
-        reader = StreamReader(src, emit_chunks=True, validate_crcs=True,  # type: ignore[arg-type]
-                              record_size_limit=scan.size)
+        reader = _Reader(src, emit_chunks=True, validate_crcs=True,  # type: ignore[arg-type]
+                         record_size_limit=scan.size)
         records = reader.records
         good_end = 0        # end of the last record read intact
         first = True
@@ -381,6 +406,9 @@ def _light_records(chunk: Chunk) -> list[Any]:
         raise ValueError(f"implausible chunk size {chunk.uncompressed_size}")
     stream, size = get_chunk_data_stream(chunk, validate_crc=True)
     data = stream.read(size)
+    run = _uniform_run(data, size)
+    if run is not None:
+        return [run]
     channels: list[int] = []
     payloads: list[bytes] = []
     head = _MESSAGE_HEAD.unpack_from
@@ -397,6 +425,23 @@ def _light_records(chunk: Chunk) -> list[Any]:
     except struct.error:
         return breakup_chunk(chunk, validate_crc=True)
     return [MessageRun(channels, payloads)] if payloads else []
+
+
+def _uniform_run(data: bytes, size: int) -> MessageRun | None:
+    """The messages of a chunk whose records are all messages of one length (a fixed-layout
+    channel), found with numpy; None for any other chunk."""
+    if size < 31:
+        return None
+    op, length, _ = _MESSAGE_HEAD.unpack_from(data, 0)
+    step = 9 + length
+    if op != Opcode.MESSAGE or length < 22 or size % step:
+        return None
+    rows = np.frombuffer(data, dtype=np.uint8).reshape(-1, step)
+    if not ((rows[:, 0] == op).all() and (rows[:, 1:9] == rows[0, 1:9]).all()):
+        return None
+    channels = rows[:, 9:11].copy().view("<u2").ravel().tolist()
+    return MessageRun(channels, cut=lambda: [data[p:p + length - 22]
+                                             for p in range(31, size, step)])
 
 
 def _take(scan: McapScan, record: Any, keep_messages: bool = True) -> None:
