@@ -548,3 +548,31 @@ def test_json_messages_orjson_refuses_are_read_by_json(tmp_path, off_square, run
     assert back.n_samples == 40
     assert ("message 40 on /ropod/sysid cannot be decoded (JSONDecodeError: Expecting "
             "property name enclosed in double quotes") in str(caught[0].message)
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_log_channel_interleaved_with_another_reads_the_same(tmp_path, mcap_files, off_square,
+                                                              encoding):
+    """Chunks that mix our channel with another topic's messages (as a robot's recording
+    does) give the same log, whole and in chunks."""
+    from ropod_sysid.io.mcaplog import new_writer
+
+    scan = scan_mcap(mcap_files[encoding])
+    (channel,) = scan.channels.values()
+    schema = scan.schemas[channel.schema_id]
+    path = tmp_path / "mixed.mcap"
+    with open(path, "wb") as f:
+        w = new_writer(f)
+        sid = w.register_schema(schema.name, schema.encoding, schema.data)
+        cid = w.register_channel(channel.topic, channel.message_encoding, sid)
+        other = w.register_channel("/tf", "json", w.register_schema("x/Y", "jsonschema", b"{}"))
+        for k, m in enumerate(scan.messages[channel.id]):
+            w.add_message(cid, m.log_time, m.data, m.publish_time, k)
+            if k % 3 == 0:
+                w.add_message(other, m.log_time, b'{"x": %d}' % k, m.log_time, k)
+        w.finish()
+    whole = read_quiet(mcap_files[encoding], off_square)
+    assert_same_log(read_quiet(path, off_square), whole)
+    ok, log, texts, _ = read_chunked(path, off_square, 500)
+    assert ok == "ok" and texts == []
+    assert_same_log(log, whole)

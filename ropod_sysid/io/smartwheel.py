@@ -40,6 +40,9 @@ unit's settings ``left_motor``, ``sign_left``, ``sign_right``, ``pivot_offset``:
   ``voltage_range`` (default [10, 60] V), and non-monotonic ``sensor_ts`` (a frame not after the
   last kept one, or a forward spike that the next frame falls back from). How many were dropped,
   why and where (frame numbers and times) goes into ``Log.notes`` and a warning.
+
+The checks and the conversion run piece by piece (:class:`ropod_sysid.io.swframes.FrameChecks`),
+so an MCAP recording streams in chunks with the same samples and note as one piece.
 """
 
 from __future__ import annotations
