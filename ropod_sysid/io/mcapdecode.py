@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -178,6 +179,27 @@ def contract_log(rows: Rows, decoder: BatchDecoder, platform: Platform, where: s
     return _checked(*arrays, platform, where, offset, whole)
 
 
+class ContractPieces:
+    """Rows of our layout → one log per chunk, time checked across the chunks."""
+
+    def __init__(self, stream: Any, platform: Platform, where: str) -> None:
+        self.decoder = contract_decoder(stream.encoding, stream.schema, stream.channel.topic,
+                                        where)
+        self.platform, self.where = platform, where
+        self.t_last: float | None = None
+
+    def logs(self, rows: Rows | None, done: int, final: bool) -> Iterator[Log]:
+        assert rows is not None     # (_check_recovered: a log has messages)
+        log = contract_log(rows, self.decoder, self.platform, self.where, offset=done,
+                           whole=final and done == 0)
+        if self.t_last is not None and not log.t[0] > self.t_last:
+            raise InputError(f"{self.where}: message {done}: time t={float(log.t[0])!r} is "
+                             f"not after t={self.t_last!r} of message {done - 1}; time must "
+                             "strictly increase")
+        self.t_last = float(log.t[-1])
+        yield log
+
+
 def _json_columns(decoded: list[Any], units: list[str], has_pose: bool
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
     """t, values and pose of parsed JSON messages, one list per field; None when any message
@@ -312,4 +334,5 @@ def _check_units(log_units: list[str], platform: Platform, where: str) -> None:
             f"{', '.join(platform.unit_names)}; use the platform file that matches the log")
 
 
-__all__ = ["BatchDecoder", "Rows", "contract_decoder", "contract_log", "ros2_decoder"]
+__all__ = ["BatchDecoder", "ContractPieces", "Rows", "contract_decoder", "contract_log",
+           "ros2_decoder"]

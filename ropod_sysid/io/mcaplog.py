@@ -57,7 +57,7 @@ from mcap.writer import Writer as McapWriter
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log, join_logs
-from ropod_sysid.io.mcapdecode import Rows, contract_decoder, contract_log
+from ropod_sysid.io.mcapdecode import ContractPieces, Rows
 from ropod_sysid.platform import Platform
 
 try:  # the compressors mcap uses; their errors mean a broken chunk
@@ -410,7 +410,7 @@ def _light_records(chunk: Chunk) -> list[Any]:
     if run is not None:
         return [run]
     channels: list[int] = []
-    payloads: list[bytes] = []
+    ends: list[int] = []
     head = _MESSAGE_HEAD.unpack_from
     pos = 0
     try:
@@ -420,11 +420,14 @@ def _light_records(chunk: Chunk) -> list[Any]:
             if op != Opcode.MESSAGE or length < 22 or end > size:
                 return breakup_chunk(chunk, validate_crc=True)
             channels.append(cid)
-            payloads.append(data[pos + 31:end])
+            ends.append(end)
             pos = end
     except struct.error:
         return breakup_chunk(chunk, validate_crc=True)
-    return [MessageRun(channels, payloads)] if payloads else []
+    if not ends:
+        return []
+    return [MessageRun(channels, cut=lambda: [data[s + 31:e] for s, e in
+                                              zip([0, *ends[:-1]], ends, strict=True)])]
 
 
 def _uniform_run(data: bytes, size: int) -> MessageRun | None:
@@ -568,8 +571,12 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> 
     scan = scan_mcap(path, keep_messages=False)
     stream = pick_stream(scan, where)
     cid = stream.channel.id
-    pieces = (_ContractPieces if stream.layout == "contract" else _SmartWheelPieces)(
-        stream, platform, where, chunk)
+    if stream.layout == "contract":
+        pieces: Any = ContractPieces(stream, platform, where)
+    else:
+        from ropod_sysid.io.swframes import SmartWheelPieces
+
+        pieces = SmartWheelPieces(stream, platform, where, chunk)
     damage = scan.damage
     pending: list[Rows] = []
     n_pending = 0
@@ -625,69 +632,6 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> 
     for note in last.notes:
         warnings.warn(note, stacklevel=2)
     yield from out
-
-
-class _ContractPieces:
-    """Rows of our layout → one log per chunk, time checked across the chunks."""
-
-    def __init__(self, stream: Stream, platform: Platform, where: str, chunk: int) -> None:
-        self.decoder = contract_decoder(stream.encoding, stream.schema, stream.channel.topic,
-                                        where)
-        self.platform, self.where = platform, where
-        self.t_last: float | None = None
-
-    def logs(self, rows: Rows | None, done: int, final: bool) -> Iterator[Log]:
-        assert rows is not None     # (_check_recovered: a log has messages)
-        log = contract_log(rows, self.decoder, self.platform, self.where, offset=done,
-                           whole=final and done == 0)
-        if self.t_last is not None and not log.t[0] > self.t_last:
-            raise InputError(f"{self.where}: message {done}: time t={float(log.t[0])!r} is "
-                             f"not after t={self.t_last!r} of message {done - 1}; time must "
-                             "strictly increase")
-        self.t_last = float(log.t[-1])
-        yield log
-
-
-class _SmartWheelPieces:
-    """Rows of the smart-wheel layout → frames → checked samples, in chunks of ``chunk``
-    samples (the checks drop frames and hold back the last two good ones)."""
-
-    def __init__(self, stream: Stream, platform: Platform, where: str, chunk: int) -> None:
-        from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, VOLTAGE_RANGE
-        from ropod_sysid.io.swframes import FrameChecks, smartwheel_decoder
-
-        self.decoder = smartwheel_decoder(stream.encoding, stream.schema, stream.channel.topic,
-                                          where)
-        self.checks = FrameChecks(platform, where, REQUIRED_FLOATS, VOLTAGE_RANGE)
-        self.platform, self.where, self.chunk = platform, where, chunk
-        self.out: list[Log] = []
-        self.n_out = 0
-
-    def _add(self, piece: Log | None) -> None:
-        if piece is not None:
-            self.out.append(piece)
-            self.n_out += piece.n_samples
-
-    def logs(self, rows: Rows | None, done: int, final: bool) -> Iterator[Log]:
-        from ropod_sysid.io.swframes import rows_to_frames
-
-        if rows is not None:
-            ts, values, malformed, notes = rows_to_frames(rows, self.decoder, self.platform,
-                                                          self.where, done)
-            self.checks.notes += notes
-            self._add(self.checks.push(ts, values, malformed))
-        notes = []
-        if final:
-            piece, notes = self.checks.finish()
-            self._add(piece)
-        while self.n_out > self.chunk or (final and self.n_out):
-            log = join_logs(self.out, [])
-            take = min(self.chunk, log.n_samples)
-            self.out = [log.slice(take, log.n_samples)] if take < log.n_samples else []
-            self.n_out -= take
-            piece = log.slice(0, take)
-            piece.notes = notes if not self.n_out else []
-            yield piece
 
 
 def _undecodable(k: int, stream: Stream, exc: BaseException) -> str:

@@ -14,13 +14,15 @@ for bit, and the note is the same.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.cdr import struct_array_layout
-from ropod_sysid.io.log import Log
+from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.mcapdecode import BatchDecoder, Rows, ros2_decoder
 from ropod_sysid.odometry import unwrap_from
 from ropod_sysid.platform import Platform
@@ -312,4 +314,44 @@ def rows_to_frames(rows: Rows, decoder: BatchDecoder, platform: Platform, where:
     return fr.sensor_ts, fr.values, fr.malformed, fr.notes
 
 
-__all__ = ["FrameChecks", "rows_to_frames", "sensor_fields", "smartwheel_decoder"]
+class SmartWheelPieces:
+    """Rows of the smart-wheel layout → frames → checked samples, in chunks of ``chunk``
+    samples (the checks drop frames and hold back the last two good ones)."""
+
+    def __init__(self, stream: Any, platform: Platform, where: str, chunk: int) -> None:
+        from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, VOLTAGE_RANGE
+
+        self.decoder = smartwheel_decoder(stream.encoding, stream.schema, stream.channel.topic,
+                                          where)
+        self.checks = FrameChecks(platform, where, REQUIRED_FLOATS, VOLTAGE_RANGE)
+        self.platform, self.where, self.chunk = platform, where, chunk
+        self.out: list[Log] = []
+        self.n_out = 0
+
+    def _add(self, piece: Log | None) -> None:
+        if piece is not None:
+            self.out.append(piece)
+            self.n_out += piece.n_samples
+
+    def logs(self, rows: Rows | None, done: int, final: bool) -> Iterator[Log]:
+        if rows is not None:
+            ts, values, malformed, notes = rows_to_frames(rows, self.decoder, self.platform,
+                                                          self.where, done)
+            self.checks.notes += notes
+            self._add(self.checks.push(ts, values, malformed))
+        notes = []
+        if final:
+            piece, notes = self.checks.finish()
+            self._add(piece)
+        while self.n_out > self.chunk or (final and self.n_out):
+            log = join_logs(self.out, [])
+            take = min(self.chunk, log.n_samples)
+            self.out = [log.slice(take, log.n_samples)] if take < log.n_samples else []
+            self.n_out -= take
+            piece = log.slice(0, take)
+            piece.notes = notes if not self.n_out else []
+            yield piece
+
+
+__all__ = ["FrameChecks", "SmartWheelPieces", "rows_to_frames", "sensor_fields",
+           "smartwheel_decoder"]
