@@ -60,6 +60,10 @@ class Rows:
     def join(parts: list[Rows]) -> Rows:
         if len(parts) == 1:
             return parts[0]
+        if len({p.objects is None for p in parts}) > 1:       # JSON columns and objects
+            parts = [p if p.objects is not None else Rows(p.payloads, [_parse(x) for x in
+                                                                       p.payloads])
+                     for p in parts]
         objects = None if parts[0].objects is None else [o for p in parts for o in p.objects]
         fast = None if parts[0].fast is None else np.concatenate([p.fast for p in parts])
         return Rows([b for p in parts for b in p.payloads], objects, fast,
@@ -86,10 +90,12 @@ class BatchDecoder:
     """Decodes batches of one channel's payloads (``encoding`` json or ros2); ``layout_of``
     gives the fixed layout of a ROS 2 message from its payload and decoding (None: none)."""
 
-    def __init__(self, encoding: str, decode: Any, layout_of: Any = None) -> None:
+    def __init__(self, encoding: str, decode: Any, layout_of: Any = None,
+                 columns_of: Any = None) -> None:
         from ropod_sysid.io.mcaplog import READ_ERRORS
 
         self.encoding, self.decode, self._layout_of = encoding, decode, layout_of
+        self._columns_of = columns_of
         self._errors = READ_ERRORS
         self.layout: FixedLayout | None = None
         self.template: Any = None      # the decoded first message, whose layout it is
@@ -103,6 +109,9 @@ class BatchDecoder:
         return self._ros2(payloads)
 
     def _json(self, payloads: list[bytes]) -> tuple[Rows, int | None, BaseException | None]:
+        columns = self._columns_of(payloads) if self._columns_of is not None else None
+        if columns is not None:
+            return Rows(payloads, columns=columns), None, None
         try:
             return Rows(payloads, list(map(orjson.loads, payloads))), None, None
         except orjson.JSONDecodeError:
@@ -150,9 +159,10 @@ class BatchDecoder:
 # rows → contract log
 
 
-def contract_decoder(encoding: str, schema: Any, topic: str, where: str) -> BatchDecoder:
+def contract_decoder(encoding: str, schema: Any, topic: str, where: str,
+                     units: list[str]) -> BatchDecoder:
     if encoding == "json":
-        return BatchDecoder("json", json.loads)
+        return BatchDecoder("json", json.loads, columns_of=lambda p: _arrow_columns(p, units))
     return BatchDecoder("ros2", ros2_decoder(schema, topic, where), contract_layout)
 
 
@@ -162,15 +172,25 @@ def contract_log(rows: Rows, decoder: BatchDecoder, platform: Platform, where: s
     message in the file (for the messages' numbers in errors); ``whole``: the messages are the
     whole log (else a chunk of it: too few of them is no error)."""
     if decoder.encoding == "json":
-        first = rows.objects[0]
+        first = rows.objects[0] if rows.objects is not None else _parse(rows.payloads[0])
         if not isinstance(first, dict) or not isinstance(first.get("units"), dict):
             raise InputError(f"{where}: message {offset} is not a ropod-sysid log sample "
                              "(expected keys 't' and 'units'); the file may use another layout")
         _check_units(list(first["units"]), platform, where)
         has_pose = isinstance(first.get("pose"), dict)
-        arrays = _json_columns(rows.objects, platform.unit_names, has_pose)
+        arrays = None
+        cols = rows.columns
+        if rows.objects is None and (not has_pose or cols["pose_ok"].all()):
+            arrays = cols["t"], cols["values"], cols["pose"] if has_pose else None
+            if not all(np.isfinite(a).all() for a in arrays if a is not None):
+                arrays = None                             # let the loop name the message
+        objects = rows.objects
+        if arrays is None and objects is None:
+            objects = [_parse(p) for p in rows.payloads]
         if arrays is None:
-            arrays = _json_loop(rows.objects, platform.unit_names, has_pose, where, offset)
+            arrays = _json_columns(objects, platform.unit_names, has_pose)
+        if arrays is None:
+            arrays = _json_loop(objects, platform.unit_names, has_pose, where, offset)
     else:
         arrays = _ros2_columns(rows, decoder, platform, where)
         if arrays is None:
@@ -184,7 +204,7 @@ class ContractPieces:
 
     def __init__(self, stream: Any, platform: Platform, where: str) -> None:
         self.decoder = contract_decoder(stream.encoding, stream.schema, stream.channel.topic,
-                                        where)
+                                        where, platform.unit_names)
         self.platform, self.where = platform, where
         self.t_last: float | None = None
 
@@ -198,6 +218,73 @@ class ContractPieces:
                              "strictly increase")
         self.t_last = float(log.t[-1])
         yield log
+
+
+def _parse(payload: bytes) -> Any:
+    try:
+        return orjson.loads(payload)
+    except orjson.JSONDecodeError:
+        return json.loads(payload)
+
+
+def _arrow_columns(payloads: list[bytes], units: list[str]) -> dict[str, np.ndarray] | None:
+    """t (n,), values (n, units, 5), pose (n, 3) and pose_ok (n,) of JSON messages, parsed by
+    Arrow's JSON reader (columns straight from the text, without the GIL); None unless every
+    message is one line of UTF-8 holding every field as a number, and no value is a negative
+    zero (``-0`` is 0.0 to Python's parser, -0.0 to Arrow's): then the messages are parsed
+    one by one."""
+    import pyarrow as pa
+    import pyarrow.json as pajson
+
+    n = len(payloads)
+    joined = b"\n".join(payloads)
+    if not n or joined.count(b"\n") != n - 1 or b"\r" in joined or b"\xef\xbb\xbf" in joined:
+        return None
+    try:
+        joined.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    num = pa.float64()
+    unit = pa.struct([(f, num) for f in UNIT_FIELDS])
+    schema = pa.schema([("t", num), ("units", pa.struct([(u, unit) for u in units])),
+                        ("pose", pa.struct([(f, num) for f in POSE_FIELDS]))])
+    try:
+        table = pajson.read_json(
+            io.BytesIO(joined), read_options=pajson.ReadOptions(block_size=1 << 20),
+            parse_options=pajson.ParseOptions(explicit_schema=schema,
+                                              unexpected_field_behavior="ignore"))
+    except (pa.ArrowException, ValueError, OverflowError):
+        return None
+    if table.num_rows != n:
+        return None
+
+    def col(arr: Any) -> np.ndarray | None:
+        return None if arr.null_count else arr.to_numpy(zero_copy_only=False)
+
+    t = col(table.column("t").combine_chunks())
+    us = table.column("units").combine_chunks()
+    if t is None or us.null_count:
+        return None
+    values = np.empty((n, len(units), 5))
+    for i in range(len(units)):
+        e = us.field(i)
+        if e.null_count:
+            return None
+        for j in range(5):
+            c = col(e.field(j))
+            if c is None:
+                return None
+            values[:, i, j] = c
+    pose = table.column("pose").combine_chunks()
+    ok = ~pose.is_null().to_numpy(zero_copy_only=False)
+    xyz = np.empty((n, 3))
+    for j in range(3):
+        f = pose.field(j)
+        ok &= ~f.is_null().to_numpy(zero_copy_only=False)
+        xyz[:, j] = f.to_numpy(zero_copy_only=False)
+    if any(((a == 0) & np.signbit(a)).any() for a in (t, values, xyz[ok])):
+        return None
+    return {"t": t, "values": values, "pose": xyz, "pose_ok": ok}
 
 
 def _json_columns(decoded: list[Any], units: list[str], has_pose: bool
