@@ -540,6 +540,19 @@ def test_json_messages_orjson_refuses_are_read_by_json(tmp_path, off_square, run
 
     write([json.dumps(m).encode() for m in msgs])
     assert_same_log(read_quiet(path, off_square), expected)
+    texts = [json.dumps(m).encode() for m in msgs]
+    texts[6] = texts[6].replace(b'"t": ', b'"t":\n ', 1)        # JSON over two lines
+    texts[7] = re.sub(rb'"phi_L": [^,]+', b'"phi_L": -0', texts[7], count=1)  # Python: 0.0
+    expected.phi[7, 0, 0] = 0.0
+    write(texts)
+    back = read_quiet(path, off_square)
+    assert_same_log(back, expected)
+    assert not np.signbit(back.phi[7, 0, 0])
+    del msgs[9]["units"]["3"]["delta"]
+    write([json.dumps(m).encode() for m in msgs])
+    with pytest.raises(InputError, match=r"message 9 lacks a log field \(no 'delta'\)"):
+        read_mcap_log(path, off_square)
+    msgs[9]["units"]["3"]["delta"] = 0.5
     write([json.dumps(m).encode() for m in msgs[:40]] + [b'{"t": 1.0, "units": {'] +
           [json.dumps(m).encode() for m in msgs[41:]])
     with warnings.catch_warnings(record=True) as caught:
