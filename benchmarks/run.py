@@ -19,10 +19,11 @@
      (``fit_logs`` of the whole log) on the M/3-minute log;
    - the O(N) LOESS against the brute-force definition on 10⁵ samples (ratio);
    - 8 logs (copies of the 60 s run) with ``--workers 2`` against serial (speed-up).
-   - MCAP (issue 13): ``fit`` of an M'-minute log (3 by default) as JSON MCAP, ROS 2 MCAP and
-     the robot's smart-wheel layout (ROS 2), each against ``mcap``'s own reader only iterating
-     that file's raw messages (``make_reader(f).iter_messages()``, payloads untouched), and the
-     peak memory of each fit on M' and 2M' minutes.
+   - MCAP (issue 13): ``fit`` of an M'-minute log (3 by default, ``--mcap-minutes``) as JSON
+     MCAP, ROS 2 MCAP and the robot's smart-wheel layout (ROS 2), each against ``mcap``'s own
+     reader only iterating that file's raw messages (``make_reader(f).iter_messages()``,
+     payloads untouched; goal ≤ 1.5×, JSON ≤ 2.5×), and the peak memory of each fit on M' and
+     2M' minutes (flat). The files are written once by ropod-sysid and cached.
 3. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
    (``--only mcap``: only the MCAP part, to ``results_mcap.{md,json}``).
 
