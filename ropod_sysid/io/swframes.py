@@ -14,6 +14,7 @@ for bit, and the note is the same.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -40,24 +41,37 @@ class _Held:
     floats: np.ndarray     # (F, g, n)
 
 
-def _monotonic(v: list[int], last: int | None, decide: int) -> tuple[list[bool], int | None]:
+def _monotonic(v: list[int], last: int | None, decide: int, drops: list[int]
+               ) -> tuple[list[bool], int | None]:
     """Which of the first ``decide`` values of one unit's clock to keep — each after the last
     kept one, and no forward spikes (a value that the next one falls back from, the next
     still after the last kept one) — looking ahead at ``v[decide:]`` (two values, or none at
-    the end of the log); and the last kept value after them."""
+    the end of the log); and the last kept value after them. ``drops``: the positions ``p``
+    where ``v[p + 1] <= v[p]``; the rising runs between them are kept without a look."""
     n = len(v)
     keep = [True] * decide
-    for k in range(decide):
+    k = 0
+    while k < decide:
         cur = v[k]
         if last is not None and cur <= last:
             keep[k] = False
+            k += 1
             continue
         nxt = v[k + 1] if k + 1 < n else None
         if nxt is not None and nxt <= cur and (last is None or nxt > last) and \
                 (last is not None or k + 2 >= n or v[k + 2] > nxt):
             keep[k] = False
+            k += 1
             continue
         last = cur
+        if nxt is not None and nxt > cur:       # a rising run up to the next fall-back
+            j = bisect_left(drops, k + 1)
+            stop = min(drops[j] if j < len(drops) else n, decide)
+            if stop > k + 1:
+                last = v[stop - 1]
+                k = stop
+                continue
+        k += 1
     return keep, last
 
 
@@ -133,7 +147,8 @@ class FrameChecks:
                 if decide:
                     self.last_ts[i] = int(col[decide - 1])
                 continue
-            keep, self.last_ts[i] = _monotonic(col.tolist(), last, decide)
+            drops = np.flatnonzero(col[1:] <= col[:-1]).tolist()
+            keep, self.last_ts[i] = _monotonic(col.tolist(), last, decide, drops)
             mono &= np.array(keep, dtype=bool)
         self._count(4, index[:decide][~mono])
         self.held = _Held(index[decide:], gts[decide:], gfl[:, decide:])
