@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Benchmark of long logs and fleets (issue 7): streaming fit, memory, O(N) LOESS, Dask.
 
-    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only mcap] [--mcap-minutes 3]
+    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only report|mcap]
+        [--mcap-minutes 3]
 
 1. Simulates a 60 s rest-to-rest ropod run at 1 kHz with ``ropod-sysid simulate`` (2¹⁴-count
    encoders, 30 mA current noise). Simulating 30 minutes at 1 kHz directly takes over an hour
@@ -24,8 +25,14 @@
      reader only iterating that file's raw messages (``make_reader(f).iter_messages()``,
      payloads untouched; goal ≤ 1.5×, JSON ≤ 2.5×), and the peak memory of each fit on M' and
      2M' minutes (flat). The files are written once by ropod-sysid and cached.
-3. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
-   (``--only mcap``: only the MCAP part, to ``results_mcap.{md,json}``).
+3. The report (issue 13), also alone with ``--only report``: ``ropod-sysid report`` on the
+   shipped sample (goal ≤ 2 s); ``fit`` and ``fit --report`` on the shipped sample (the
+   README's first command) and on the M/3-minute log, as the ratio
+   ``fit --report`` / (1.5 × ``fit`` + 1 s) (goal ≤ 1); the peak memory of ``fit --report``
+   on the M/3- and M-minute logs (goal: flat).
+4. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
+   (``--only report``: ``report.{md,json}``; ``--only mcap``: only the MCAP part, to
+   ``results_mcap.{md,json}``).
 
 ``--quick`` (for debugging the script): a 15 s run, logs of 0.5, 1 and 2 minutes, LOESS on
 2·10⁴ samples.
@@ -52,6 +59,7 @@ import pyarrow.csv as pacsv
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
+SAMPLE = HERE.parent / "datasets" / "ropod"  # the shipped sample of the README
 RATE = 1000
 REPEATS = 3  # runs of each parse and fit; the fastest counts
 OFF_SQUARE = [[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]]
@@ -325,14 +333,7 @@ def mcap_rows(m: dict[str, Any]) -> list[tuple[str, str, str, str]]:
 
 def write_table(rows: list[tuple[str, str, str, str]], note: str, results: dict[str, Any],
                 name: str, started: float) -> None:
-    head = ("figure", "measured", "ratio / time", "goal")
-    widths = [max(len(str(r[i])) for r in [head, *rows]) for i in range(4)]
-
-    def line(r: tuple) -> str:
-        return "| " + " | ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)) + " |"
-
-    table = "\n".join([line(head), line(tuple("-" * w for w in widths)),
-                       *(line(r) for r in rows)])
+    table = table_text(rows)
     say("\n" + table + "\n\n" + note)
     results["table"] = rows
     results["note"] = note
@@ -436,6 +437,86 @@ def capacity() -> float:
     return min(ones) / min(twos)
 
 
+def best(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The fastest wall time of several runs of a command and the largest peak RSS."""
+    return {"wall_s": min(float(r["wall_s"]) for r in runs),
+            "runs_s": [float(r["wall_s"]) for r in runs],
+            "max_rss_mb": max(float(r["max_rss_mb"]) for r in runs)}
+
+
+def report_figures(logs: list[Path], platform_path: Path, long_logs: list[tuple[float, Path]],
+                   repeats: int) -> tuple[dict[str, Any], list[tuple[str, str, str, str]]]:
+    """Issue 13: ``report`` on the shipped sample; ``fit --report`` against ``fit`` on the
+    sample and on long logs, as (fit --report) / (1.5 fit + 1 s); its peak memory.
+
+    Each command in its own process, alternating, the fastest of ``repeats`` runs counting
+    (the machine is shared)."""
+    out = OUT / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    sample = sorted(str(p) for p in logs)
+    platform = str(SAMPLE / "platform.yaml")
+    params = out / "sample_params.json"
+    fit_cmd = [*ropod_sysid(), "fit", *sample, "--platform", platform, "--out", str(params),
+               "--quiet"]
+    report_cmd = [*fit_cmd, "--report", str(out / "sample_fit.html"), "--compare",
+                  str(SAMPLE / "truth.json")]
+    subprocess.run(fit_cmd, check=True)  # the parameter file the report command shows
+    alone_cmd = [*ropod_sysid(), "report", *sample, "--platform", platform, "--params",
+                 str(params), "--out", str(out / "sample_report.html"), "--quiet"]
+    fits, fit_reports, reports = [], [], []
+    for _ in range(repeats):
+        fits.append(run_measured(fit_cmd))
+        fit_reports.append(run_measured(report_cmd))
+        reports.append(run_measured(alone_cmd))
+
+    res: dict[str, Any] = {"sample": {"fit": best(fits), "fit_report": best(fit_reports),
+                                      "report": best(reports)}, "long": {}}
+    say("shipped sample: " + ", ".join(
+        f"{k} {'/'.join(f'{x:.1f}' for x in v['runs_s'])} s" for k, v in res["sample"].items()))
+    for minutes, path in long_logs:
+        cmd = [*ropod_sysid(), "fit", str(path), "--platform", str(platform_path), "--out",
+               str(out / f"params_{minutes:g}min.json"), "--quiet"]
+        rcmd = [*cmd, "--report", str(out / f"fit_{minutes:g}min.html")]
+        f, r = [], []
+        for _ in range(max(1, repeats // 2)):
+            f.append(run_measured(cmd))
+            r.append(run_measured(rcmd))
+        res["long"][f"{minutes:g}"] = {"fit": best(f), "fit_report": best(r)}
+        say(f"{minutes:g} min: fit {best(f)['wall_s']:.1f} s, {best(f)['max_rss_mb']:.0f} MB; "
+            f"fit --report {best(r)['wall_s']:.1f} s, {best(r)['max_rss_mb']:.0f} MB")
+
+    def ratio(entry: dict[str, Any]) -> str:
+        f, r = entry["fit"]["wall_s"], entry["fit_report"]["wall_s"]
+        return f"{r:.1f} s / (1.5 × {f:.1f} s + 1 s) = {r / (1.5 * f + 1):.2f}"
+
+    s = res["sample"]
+    rows = [("report, shipped sample (4 × 60 s, 100 Hz)", f"{s['report']['wall_s']:.2f} s",
+             "runs " + "/".join(f"{x:.1f}" for x in s["report"]["runs_s"]) + " s", "≤ 2 s"),
+            ("fit --report vs fit, shipped sample", ratio(s),
+             f"fit {s['fit']['wall_s']:.2f} s", "≤ 1")]
+    for minutes, _ in long_logs:
+        e = res["long"][f"{minutes:g}"]
+        rows.append((f"fit --report vs fit, {minutes:g} min at 1 kHz", ratio(e),
+                     f"fit {e['fit']['wall_s']:.1f} s", "≤ 1"))
+    for minutes, _ in long_logs:
+        e = res["long"][f"{minutes:g}"]
+        rows.append((f"fit --report peak RSS, {minutes:g} min",
+                     f"{e['fit_report']['max_rss_mb']:.0f} MB",
+                     f"fit alone {e['fit']['max_rss_mb']:.0f} MB", "flat"))
+    return res, rows
+
+
+def table_text(rows: list[tuple]) -> str:
+    head = ("figure", "measured", "ratio / time", "goal")
+    widths = [max(len(str(r[i])) for r in [head, *rows]) for i in range(4)]
+
+    def line(r: tuple) -> str:
+        return "| " + " | ".join(str(c).ljust(w) for c, w in zip(r, widths, strict=True)) + " |"
+
+    return "\n".join([line(head), line(tuple("-" * w for w in widths)),
+                      *(line(r) for r in rows)])
+
+
 def load() -> str:
     try:
         return " ".join(f"{v:.1f}" for v in os.getloadavg())
@@ -452,8 +533,9 @@ def main() -> None:
                     help="length of the main log [min]; memory is also shown at 1/3 and 2x")
     ap.add_argument("--quick", action="store_true", help="small sizes, to debug the script")
     ap.add_argument("--fresh", action="store_true", help="simulate again even if cached")
-    ap.add_argument("--only", choices=("all", "mcap"), default="all",
-                    help="mcap: only the MCAP figures (a few minutes)")
+    ap.add_argument("--only", choices=("all", "report", "mcap"), default="all",
+                    help="report: only the report's figures; mcap: only the MCAP figures "
+                    "(a few minutes each)")
     ap.add_argument("--mcap-minutes", type=float, default=3.0,
                     help="length of the MCAP log [min]; memory is also shown at 2x")
     args = ap.parse_args()
@@ -489,6 +571,17 @@ def main() -> None:
         say(f"{path.name}: {copies} × {base_s:g} s = {info['samples']:,} samples, "
             f"{info['bytes'] / 1e6:.0f} MB (pivot mismatch at a seam "
             f"{info['pivot_seam_rad']:.2g} rad)")
+
+    sample_logs = sorted(SAMPLE.glob("*.csv.gz"))
+    long_logs = [(m, logs[m][0]) for m in sizes[:2]]
+    if args.only == "report":
+        before = load()
+        rep, rows = report_figures(sample_logs, platform_path, long_logs, REPEATS)
+        rep["load_before"], rep["load_after"] = before, load()
+        note = (f"Machine: {os.cpu_count()} cores, load average {before} before, "
+                f"{rep['load_after']} after (shared); the fastest of {REPEATS} runs counts.")
+        write_table(rows, note, rep, "report", started)
+        return
 
     truth = json.loads(truth_path.read_text())
     results: dict[str, object] = {"load_before": load()}
@@ -556,6 +649,8 @@ def main() -> None:
     results["breakdown"] = parts
     say("time of a streaming fit of the base log (cProfile): " + ", ".join(
         f"{k} {v:.2f} s" for k, v in parts.items()))
+    report, report_rows = report_figures(sample_logs, platform_path, long_logs, REPEATS)
+    results["report"] = report
 
     main_fit = fits[minutes]
     rows = [
@@ -591,6 +686,7 @@ def main() -> None:
                             ("model (A_ID,ext, b_ID)", "reading CSV", "LOESS (angles, A, b)")),
                  f"QR {100 * parts['QR triangles'] / total:.0f} %, odometry "
                  f"{100 * parts['odometry'] / total:.0f} %", "(cProfile)"))
+    rows += report_rows
     results["mcap"] = mcap_bench(base, base_s, platform_path, mcap_minutes, key)
     rows += mcap_rows(results["mcap"])
     results["load_after"] = load()

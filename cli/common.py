@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import functools
+import json
+import math
 import sys
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
 from typing import Any, TypeVar
 
 import click
+from click.core import ParameterSource
 
-from ropod_sysid.errors import InputError
+from ropod_sysid.errors import InputError, one_line_warning
+from ropod_sysid.io.atomic import OutputSet
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -21,18 +26,12 @@ def fail(message: str) -> None:
     sys.exit(2)
 
 
-def _one_line_warning(message: Warning | str, category: type[Warning], filename: str,
-                      lineno: int, line: str | None = None) -> str:
-    """Warnings (e.g. a damaged MCAP file read up to the damage) as one line on stderr."""
-    return f"warning: {' '.join(str(message).split())}\n"
-
-
 def reports_errors(func: F) -> F:
     """Turn :class:`InputError` (and unreadable files) into one line and exit status 2."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        warnings.formatwarning = _one_line_warning  # type: ignore[assignment]
+        warnings.formatwarning = one_line_warning  # type: ignore[assignment]
         try:
             return func(*args, **kwargs)
         except InputError as exc:
@@ -46,8 +45,159 @@ def reports_errors(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+def writes(outputs: Mapping[str, str] | None = None, inputs: Mapping[str, str] | None = None,
+           folders: Mapping[str, str] | None = None,
+           folder_files: Iterable[str] = ()) -> Callable[[F], F]:
+    """The command writes the files of its parameters ``outputs`` and reads ``inputs``
+    (parameter name → option or argument name, e.g. ``{"out_path": "--out"}``; a parameter may
+    hold several paths). Before the command runs they are checked, and its files are written
+    all or none (:class:`~ropod_sysid.io.atomic.OutputSet`). ``folders`` are output folders,
+    made if missing, into which the command writes ``folder_files``. Goes under
+    :func:`reports_errors`."""
+    names = list(folder_files)
+
+    def pairs(spec: Mapping[str, str] | None, kwargs: dict[str, Any]) -> list[tuple[str, Any]]:
+        out = []
+        for name, label in (spec or {}).items():
+            value = kwargs[name]
+            out += [(label, v) for v in (value if isinstance(value, tuple | list) else [value])]
+        return out
+
+    def decorate(func: F) -> F:
+        @functools.wraps(func)
+        def wrapper(**kwargs: Any) -> Any:
+            dirs = pairs(folders, kwargs)
+            files = [(label, Path(d) / n) for label, d in dirs for n in names]
+            with OutputSet(pairs(outputs, kwargs) + files, pairs(inputs, kwargs), folders=dirs):
+                return func(**kwargs)
+
+        return wrapper  # type: ignore[return-value]
+
+    return decorate
+
+
+def given(name: str) -> bool:
+    """Whether the user gave option ``name`` (the parameter's name) rather than its default."""
+    ctx = click.get_current_context()
+    return ctx.get_parameter_source(name) not in (None, ParameterSource.DEFAULT)
+
+
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 platform_option = click.option(
     "--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
     help="Platform YAML (geometry, units; see the data contract).",
 )
+
+
+class OptionError(click.ClickException):
+    """A bad option value, found while the options are parsed: ``error: <message>`` on one
+    line, exit status 2, before any work."""
+
+    exit_code = 2
+
+    def __init__(self, message: str) -> None:
+        super().__init__(" ".join(str(message).split()))
+
+    def show(self, file: Any = None) -> None:
+        click.echo(f"error: {self.format_message()}", err=True)
+
+
+def option_name(param: click.Parameter | None, default: str = "value") -> str:
+    """``--name`` of a click parameter (its longest option string)."""
+    if param is None or not getattr(param, "opts", None):
+        return default
+    return max(param.opts, key=len)
+
+
+def _g(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+
+
+class Number(click.ParamType):
+    """A finite number (``integer``: a whole number) in a range, checked at parse time.
+
+    ``low``/``high`` are the bounds (None: unbounded), ``low_open``/``high_open`` exclude them;
+    ``unit`` names what the number counts (``"s"``, ``"Hz"``).
+    """
+
+    def __init__(self, low: float | None = None, high: float | None = None, *,
+                 low_open: bool = False, high_open: bool = False, integer: bool = False,
+                 unit: str = "") -> None:
+        self.low, self.high = low, high
+        self.low_open, self.high_open = low_open, high_open
+        self.integer = integer
+        self.unit = unit
+        self.name = "integer" if integer else "float"
+
+    def range_text(self) -> str:
+        """The allowed values in words, e.g. 'a finite number in (0, 1)', 'a whole number ≥ 1'."""
+        what = "a whole number" if self.integer else "a finite number"
+        unit = f" {self.unit}" if self.unit else ""
+        lo, hi = self.low, self.high
+        if lo is not None and hi is not None:
+            return (f"{what} in {'(' if self.low_open else '['}{_g(lo)}, {_g(hi)}"
+                    f"{')' if self.high_open else ']'}{unit}")
+        if lo is not None:
+            return f"{what} {'>' if self.low_open else '≥'} {_g(lo)}{unit}"
+        if hi is not None:
+            return f"{what} {'<' if self.high_open else '≤'} {_g(hi)}{unit}"
+        return f"{what}{unit}"
+
+    def check(self, value: Any, name: str) -> float | int:
+        """``value`` (text or number) as a checked number; :class:`InputError` otherwise."""
+        text = str(value).strip()
+        try:
+            x = float(text)
+        except ValueError:
+            raise InputError(f"{name} {text!r}: not a number; give {self.range_text()}"
+                             ) from None
+        ok = math.isfinite(x) and (not self.integer or x.is_integer())
+        if ok and self.low is not None:
+            ok = x > self.low if self.low_open else x >= self.low
+        if ok and self.high is not None:
+            ok = x < self.high if self.high_open else x <= self.high
+        if not ok:
+            raise InputError(f"{name} {text}: must be {self.range_text()}")
+        return int(x) if self.integer else x
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        try:
+            return self.check(value, option_name(param))
+        except InputError as exc:
+            raise OptionError(str(exc)) from None
+
+
+def positive(unit: str = "", **kwargs: Any) -> Number:
+    """A finite number > 0."""
+    return Number(0, None, low_open=True, unit=unit, **kwargs)
+
+
+POSITIVE_INT = Number(1, None, integer=True)
+SEED = Number(0, 2**32 - 1, integer=True)
+
+
+class SpanType(click.ParamType):
+    """``--span``: samples (an odd whole number ≥ 5) or seconds (``0.1s``), checked at parse
+    time by :meth:`ropod_sysid.regressor.Span.parse`."""
+
+    name = "span"
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        from ropod_sysid.regressor import Span
+
+        if value is None or isinstance(value, Span):
+            return value
+        try:
+            return Span.parse(str(value))
+        except InputError as exc:
+            raise OptionError(str(exc)) from None
+
+
+def json_text(data: Any) -> str:
+    """``data`` as strict JSON (indent 2): NaN and infinities become null, numpy scalars and
+    arrays plain numbers and lists, so that every JSON parser reads it."""
+    from ropod_sysid.io.paramfile import plain_data
+
+    return json.dumps(plain_data(data), indent=2, ensure_ascii=False, allow_nan=False)

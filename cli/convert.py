@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, read_log
 from ropod_sysid.io.csvlog import write_csv_log
@@ -28,6 +28,7 @@ from ropod_sysid.platform import load_platform
                    "(sens_ROPOD_SmartWheel_t) layout using the platform's per-unit settings.")
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "OUT"}, inputs={"in_path": "IN", "platform_path": "--platform"})
 def command(in_path: str, out_path: str, platform_path: str, encoding: str | None, layout: str,
             quiet: bool) -> None:
     """Convert log IN to OUT (.csv or .mcap); the input layout is recognised by itself.
@@ -42,7 +43,7 @@ def command(in_path: str, out_path: str, platform_path: str, encoding: str | Non
     platform = load_platform(platform_path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")       # the same text is in log.notes
-        log = read_log(in_path, platform)
+        log = read_log(in_path, platform, gaps="allow")  # copied as is; fit checks gaps
     enc = encoding or "json"
     if layout == "smartwheel":
         write_smartwheel(log, out_path, platform, encoding=enc)

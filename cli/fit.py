@@ -2,22 +2,40 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import (
+    SpanType,
+    platform_option,
+    quiet_option,
+    reports_errors,
+    writes,
+)
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, fit_files
-from ropod_sysid.io import read_log
-from ropod_sysid.io.paramfile import write_parameter_file
-from ropod_sysid.platform import load_platform
-from ropod_sysid.regressor import Span
+from ropod_sysid.fit import FitOptions, FitResult, fit_files
+from ropod_sysid.inspect import motion_shortfall
+from ropod_sysid.io import read_logs
+from ropod_sysid.io.log import Log
+from ropod_sysid.io.paramfile import ParameterFile, write_parameter_file
+from ropod_sysid.io.timebase import GAP_RULE
+from ropod_sysid.platform import Platform, load_platform
+from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
 from ropod_sysid.solve import RCOND
-from ropod_sysid.summary import format_fit
+from ropod_sysid.stream import validate_sources
+from ropod_sysid.summary import format_fit, format_validation
 
 workers_option = click.option(
     "--workers", type=int, default=None, metavar="N",
     help="Reduce the logs in parallel on a local Dask cluster of N worker processes "
          "(needs: pip install 'ropod-sysid[dask]').")
+split_gaps_option = click.option(
+    "--split-gaps", is_flag=True,
+    help=f"A log with gaps in time ({GAP_RULE}) is refused; with this flag its pieces between "
+         "the gaps are fitted as separate logs, each with its own smoother ends (pieces too "
+         "short for the span are left out with a note). Pieces are named run.csv[1], "
+         "run.csv[2], … in the output.")
 dask_option = click.option(
     "--dask", "dask_address", default=None, metavar="ADDRESS",
     help="Reduce the logs on the workers of a running Dask scheduler, e.g. tcp://host:8786.")
@@ -33,6 +51,9 @@ def parse_fix(items: tuple[str, ...]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError:
             raise InputError(f"--fix {item!r}: use NAME=VALUE, e.g. --fix m_b=35.1") from None
+        if not math.isfinite(out[name.strip()]):
+            raise InputError(f"--fix {item!r}: the value must be a finite number, e.g. "
+                             "--fix m_b=35.1")
     return out
 
 
@@ -44,20 +65,20 @@ def parse_weight(text: str) -> str | float:
     except ValueError:
         raise InputError(f"--weight-rotation {text!r}: use auto, none or a positive number"
                          ) from None
-    if not w > 0:
-        raise InputError(f"--weight-rotation {text!r}: the weight must be positive")
+    if not (math.isfinite(w) and w > 0):
+        raise InputError(f"--weight-rotation {text!r}: the weight must be a finite number > 0")
     return w
 
 
-def parse_delay(text: str) -> str | float:
+def parse_delay(text: str, span: Span | None = None) -> str | float:
+    """auto, or seconds ≥ 0 and (when ``span`` is in seconds) at most one span."""
     if text == "auto":
         return text
     try:
         d = float(text.removesuffix("s"))
     except ValueError:
         raise InputError(f"--input-delay {text!r}: use auto or seconds, e.g. 0.0025") from None
-    if d < 0:
-        raise InputError(f"--input-delay {text!r}: the delay cannot be negative")
+    check_input_delay(d, span.value if span is not None and span.seconds else None)
     return d
 
 
@@ -74,14 +95,34 @@ def parse_row_step(text: str) -> int | None:
     return step
 
 
-def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_rotation: str,
-                physical: bool, input_delay: str, rcond: float,
-                row_step: str = "auto") -> FitOptions:
+def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
+                weight_rotation: str, physical: bool, input_delay: str, rcond: float,
+                row_step: str = "auto", split_gaps: bool = False) -> FitOptions:
+    sp = Span.parse(span)
     return FitOptions(friction=friction,  # type: ignore[arg-type]
-                      span=Span.parse(span), fix=parse_fix(fix),
+                      span=sp, fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
-                      physical=physical, input_delay=parse_delay(input_delay),  # type: ignore
-                      rcond=rcond, row_step=parse_row_step(row_step))
+                      physical=physical, input_delay=parse_delay(input_delay, sp),  # type: ignore
+                      rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps)
+
+
+def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span: Span | None,
+              row_step: int | None) -> list[Log]:
+    """Logs read whole for a report: with --split-gaps their pieces long enough to fit."""
+    if not split_gaps:
+        return read_logs(paths, platform)
+    return [p for log in read_logs(paths, platform, "allow")
+            for p in usable_pieces(log, span, row_step)]
+
+
+def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
+    """A fit of logs shorter than the motion ``inspect`` calls enough to fit is no result."""
+    seconds = sum(lf.triangles.duration for lf in result.logs)
+    reason = motion_shortfall(seconds, "of log")
+    if reason is not None:
+        names = ", ".join(logs[:3]) + (", …" if len(logs) > 3 else "")
+        raise InputError(f"{names}: {reason} of motion: the values of a shorter fit are noise "
+                         "(ropod-sysid inspect shows what a log lacks)")
 
 
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
@@ -93,11 +134,12 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
               default="json", show_default=True, help="Parameter file format.")
 @click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
               show_default=True, help="Friction coefficients per wheel and pivot, or shared.")
-@click.option("--span", default=None,
-              help="LOESS span: samples (21) or seconds (0.1s). Default 0.1s.")
+@click.option("--span", type=SpanType(), default=None,
+              help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default 0.1s.")
 @click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
-              help="Form an equation row every N samples; auto: about ten per span (every "
-                   "10th sample at 1 kHz with 0.1s, every sample at 100 Hz). 1 = every sample.")
+              help="Form an equation row every N samples (at most one span); auto: about ten "
+                   "per span (every 10th sample at 1 kHz with 0.1s, every sample at 100 Hz). "
+                   "1 = every sample.")
 @click.option("--fix", multiple=True, metavar="NAME=VALUE",
               help="Hold a parameter fixed (repeatable), e.g. the weighed masses.")
 @click.option("--weight-rotation", default="auto", show_default=True,
@@ -105,51 +147,72 @@ def fit_options(friction: str, span: str | None, fix: tuple[str, ...], weight_ro
 @click.option("--physical", is_flag=True,
               help="Physically consistent fit (bounded least squares); RMS cost reported.")
 @click.option("--input-delay", default="0", show_default=True,
-              help="Lag of the motion behind the logged torque: seconds or auto.")
+              help="Lag of the motion behind the logged torque: seconds, from 0 to one "
+                   "span, or auto.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the HTML fit report here.")
 @click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
-              help="With --report: a parameter file shown side by side.")
+              help="A parameter file (or flat truth mapping) shown side by side: in the "
+                   "report, or without --report beside the printed parameter table.")
 @click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
-              help="With --report: validation log (repeatable).")
+              help="Validation log (repeatable): in the report, or without --report the "
+                   "printed validation summary (as 'ropod-sysid validate').")
+@split_gaps_option
 @workers_option
 @dask_option
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out", "report_path": "--report"},
+        inputs={"logs": "LOGS", "platform_path": "--platform", "compare_path": "--compare",
+                "validate_logs": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
-            span: str | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
+            span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
-            validate_logs: tuple[str, ...], workers: int | None, dask_address: str | None,
-            quiet: bool) -> None:
+            validate_logs: tuple[str, ...], split_gaps: bool, workers: int | None,
+            dask_address: str | None, quiet: bool) -> None:
     """Fit the dynamic parameters to LOGS (stacked) and write the parameter file.
 
     Each log is read and reduced in chunks, so its length is not limited by memory; with
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
-    platform = load_platform(platform_path)
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                          row_step)
+                          row_step, split_gaps)
+    platform = load_platform(platform_path)
 
     def say(msg: str) -> None:
         if not quiet:
             click.echo(msg, err=True)
 
-    result = fit_files(list(logs), platform, options, workers=workers,
-                       dask_address=dask_address, quiet=quiet)
-    loaded = None
-    if report_path is not None:
-        # the report plots every sample: it needs the logs in memory
-        loaded = [read_log(p, platform) for p in logs]
-    write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
-    if report_path is not None:
-        from ropod_sysid.report import write_fit_report
+    compare: ParameterFile | None = None
+    compare_label: str | None = None
+    if compare_path is not None or report_path is not None:
+        # the report module (and matplotlib) only when needed: keeps a plain fit quick
+        from ropod_sysid.report import read_comparison, write_fit_report
 
-        write_fit_report(result, loaded, report_path, compare=compare_path,
-                         validation_logs=[read_log(p, platform) for p in validate_logs])
+        compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
+    # with --report, the fit's pass also gathers what the report draws: no second reading
+    result = fit_files(list(logs), platform, options, workers=workers,
+                       dask_address=dask_address, quiet=quiet, plots=report_path is not None)
+    check_enough(result, logs)
+    write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
+    validation = None
+    if validate_logs and report_path is None:
+        validation = validate_sources(list(validate_logs), platform, result.fitted_parameters(),
+                                      options.span, result.input_delay, workers=workers,
+                                      dask_address=dask_address, row_step=options.row_step,
+                                      quiet=quiet, split_gaps=split_gaps)
+    if report_path is not None:
+        write_fit_report(result, None, report_path, compare=compare, compare_label=compare_label,
+                         validation_logs=pieces_of(validate_logs, platform, split_gaps,
+                                                   options.span, options.row_step))
         say(f"wrote {report_path}")
-    if not quiet:
-        click.echo(format_fit(result))
+        compare = None  # shown in the report
+    if not quiet or compare is not None:  # --compare without --report: the table is its output
+        click.echo(format_fit(result, compare, compare_label))
+    if validation is not None:
+        click.echo("validation of the fitted values on the --validate logs:")
+        click.echo(format_validation(validation))
     say(f"wrote {out_path}")

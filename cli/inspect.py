@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
-from ropod_sysid.cli.common import platform_option, reports_errors
+from ropod_sysid.cli.common import json_text, platform_option, reports_errors
 from ropod_sysid.inspect import format_inspection, inspect_file
 from ropod_sysid.platform import load_platform
 
@@ -22,6 +20,6 @@ def command(log_path: str, platform_path: str, as_json: bool) -> None:
     platform = load_platform(platform_path)
     ins = inspect_file(log_path, platform)
     if as_json:
-        click.echo(json.dumps(ins.to_dict(), indent=2, allow_nan=False))
+        click.echo(json_text(ins.to_dict()))
     else:
         click.echo(format_inspection(ins))

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import importlib
+import warnings
+from typing import Any
 
 import click
 
 from ropod_sysid import __version__
+from ropod_sysid.errors import one_line_warning
 
 # command name → module in this package that defines ``command``
 COMMANDS = {
@@ -20,8 +23,47 @@ COMMANDS = {
 }
 
 
+class OneLineUsageError(click.ClickException):
+    """A usage error (missing option, bad choice, unknown command) as ``error: ...`` on one line
+    with exit status 2, instead of click's Usage: block."""
+
+    exit_code = 2
+
+    def __init__(self, error: click.UsageError) -> None:
+        path = error.ctx.command_path.split()[1:] if error.ctx is not None else []
+        see = " ".join(["ropod-sysid", *path, "--help"])
+        message = " ".join(error.format_message().split()).rstrip(".")
+        super().__init__(f"{message} (see '{see}')")
+
+    def show(self, file: Any = None) -> None:
+        click.echo(f"error: {self.format_message()}", file=file, err=True)
+
+
+def _one_line(error: click.UsageError) -> click.ClickException:
+    if isinstance(error, click.exceptions.NoArgsIsHelpError):
+        return error  # no arguments: the help, as click shows it
+    return OneLineUsageError(error)
+
+
 class LazyGroup(click.Group):
-    """Imports a command's module only when that command runs (keeps ``--help`` fast)."""
+    """Imports a command's module only when that command runs (keeps ``--help`` fast).
+
+    Usage errors anywhere below it come out as one line (:class:`OneLineUsageError`), and so
+    does every warning."""
+
+    def make_context(self, info_name: str | None, args: list[str],
+                     parent: click.Context | None = None, **extra: Any) -> click.Context:
+        warnings.formatwarning = one_line_warning  # type: ignore[assignment]
+        try:
+            return super().make_context(info_name, args, parent, **extra)
+        except click.UsageError as exc:
+            raise _one_line(exc) from None
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except click.UsageError as exc:
+            raise _one_line(exc) from None
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return [name for name in COMMANDS if self._load(name) is not None]

@@ -6,9 +6,15 @@ from pathlib import Path
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
-from ropod_sysid.errors import InputError
-from ropod_sysid.io import read_log
+from ropod_sysid.cli.common import (
+    SpanType,
+    platform_option,
+    quiet_option,
+    reports_errors,
+    writes,
+)
+from ropod_sysid.cli.fit import pieces_of, split_gaps_option
+from ropod_sysid.fit import fit_settings
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
@@ -26,13 +32,18 @@ from ropod_sysid.regressor import Span
                    "truth of a simulation).")
 @click.option("--validate", "validate_paths", multiple=True, type=click.Path(dir_okay=False),
               help="Validation log (repeatable): residuals and the disturbance observer.")
-@click.option("--span", default=None,
-              help="LOESS span: samples (21) or seconds (0.1s). Default: the parameter file's.")
+@click.option("--span", type=SpanType(), default=None,
+              help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default: the "
+                   "parameter file's.")
+@split_gaps_option
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out"},
+        inputs={"logs": "LOGS", "platform_path": "--platform", "params_path": "--params",
+                "compare_path": "--compare", "validate_paths": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_path: str,
-            compare_path: str | None, validate_paths: tuple[str, ...], span: str | None,
-            quiet: bool) -> None:
+            compare_path: str | None, validate_paths: tuple[str, ...], span: Span | None,
+            split_gaps: bool, quiet: bool) -> None:
     """Write the HTML report of the parameters in --params on LOGS (the fit's logs).
 
     No refit: the values and standard deviations are the file's; residuals, singular values,
@@ -40,17 +51,15 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     """
     from ropod_sysid.report import result_from_parameter_file, write_fit_report
 
-    if Path(out_path).is_dir():
-        raise InputError(f"--out {out_path}: is a directory; give the report's file name, e.g. "
-                         "report.html")
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     compare = read_parameter_file(compare_path) if compare_path is not None else None
-    sp = Span.parse(span) if span is not None else None
-    loaded = [read_log(p, platform) for p in logs]
-    validation = [read_log(p, platform) for p in validate_paths]
-    result, notes = result_from_parameter_file(platform, loaded, pfile, sp, where=params_path)
-    write_fit_report(result, loaded, out_path, compare=compare,
+    file_span, _, row_step = fit_settings(pfile, params_path)
+    validation = pieces_of(validate_paths, platform, split_gaps, span or file_span, row_step)
+    # each log streamed once: triangles and what the report draws
+    result, notes = result_from_parameter_file(platform, list(logs), pfile, span,
+                                               where=params_path, split_gaps=split_gaps)
+    write_fit_report(result, None, out_path, compare=compare,
                      compare_label=Path(compare_path).name if compare_path else None,
                      validation_logs=validation, params_source=params_path, notes=notes)
     if not quiet:

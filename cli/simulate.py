@@ -5,14 +5,28 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
+from ropod_sysid.cli.common import (
+    Number,
+    given,
+    platform_option,
+    quiet_option,
+    reports_errors,
+    writes,
+)
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, write_log
 from ropod_sysid.io.csvlog import read_numeric_table
 from ropod_sysid.io.paramfile import read_truth_parameters
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
-from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, simulate
+from ropod_sysid.simulate import (
+    MAX_DT,
+    Controller,
+    ForceSchedule,
+    Sensors,
+    check_run,
+    simulate,
+)
 from ropod_sysid.trajectory import read_trajectory_csv
 
 
@@ -24,15 +38,18 @@ from ropod_sysid.trajectory import read_trajectory_csv
               help="Setpoint CSV with columns t, vx, vy, omega (base frame).")
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Log to write (.csv or .mcap).")
-@click.option("--rate", default=200.0, show_default=True, help="Log sample rate [Hz].")
-@click.option("--dt", default=1e-3, show_default=True,
+@click.option("--rate", default=200.0, show_default=True,
+              help="Log sample rate [Hz]; divides the integration rate 1/--dt.")
+@click.option("--dt", default=MAX_DT, show_default=True,
+              type=Number(0, MAX_DT, low_open=True, unit="s"),
               help="Integration and control step [s] (RK4, at most 1 ms).")
 @click.option("--encoder-counts", type=int, default=None,
-              help="Encoder counts per revolution (default: exact angles).")
+              help="Encoder counts per revolution, at least 16 (default: exact angles).")
 @click.option("--current-noise", default=0.0, show_default=True,
               help="Current measurement noise, standard deviation [A].")
 @click.option("--jitter", default=0.0, show_default=True,
-              help="Timestamp jitter, half-width of a uniform distribution [s].")
+              help="Timestamp jitter, half-width of a uniform distribution [s]; less than half "
+                   "the sample step.")
 @click.option("--seed", default=0, show_default=True, help="Random seed of the sensor effects.")
 @click.option("--force", "force_path", type=click.Path(dir_okay=False), default=None,
               help="External force schedule CSV: t, F_bx, F_by, T_bz (base frame).")
@@ -46,6 +63,9 @@ from ropod_sysid.trajectory import read_trajectory_csv
               show_default=True, help="auto: units trail the first motion; zero: all along x.")
 @quiet_option
 @reports_errors
+@writes(outputs={"out_path": "--out"},
+        inputs={"platform_path": "--platform", "params_path": "--params",
+                "traj_path": "--trajectory", "force_path": "--force"})
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
             dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
             seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
@@ -53,26 +73,24 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     """Simulate a run of the platform under a velocity controller and write its log."""
     if not out_path.lower().endswith(LOG_SUFFIXES):
         raise InputError(f"--out {out_path}: use a .csv or .mcap file name")
-    if dt <= 0 or dt > 1e-3 + 1e-12:
-        raise InputError(f"--dt {dt}: the integration step must be in (0, 0.001] s")
-    if rate <= 0:
-        raise InputError(f"--rate {rate}: must be positive")
+    sensors = Sensors(encoder_counts, current_noise, jitter, seed)
+    controller = Controller(kp, ki, torque_limit)
+    check_run(rate, dt, controller, sensors)  # before any work
+    if given("seed") and not (current_noise > 0 or jitter > 0):
+        raise InputError(f"--seed {seed}: seeds the current noise and timestamp jitter, and "
+                         "neither is on; give --current-noise or --jitter, or leave out --seed")
     platform = load_platform(platform_path)
     values = read_truth_parameters(params_path, platform.unit_names)
     params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
+    params.check_physical(params_path)
     setpoints = read_trajectory_csv(traj_path).to_setpoints()
     force = None
     if force_path is not None:
         fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])
         force = ForceSchedule(fc["t"], np.column_stack([fc["F_bx"], fc["F_by"], fc["T_bz"]]))
-    sensors = Sensors(encoder_counts, current_noise, jitter, seed)
-    try:
-        (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt,
-                             controller=Controller(kp, ki, torque_limit), sensors=sensors,
-                             force=force, initial_delta=initial_pivots if initial_pivots ==
-                             "auto" else None, quiet=quiet, source=out_path)
-    except ValueError as exc:
-        raise InputError(f"--rate {rate} / --dt {dt}: {exc}") from None
+    (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt, controller=controller,
+                         sensors=sensors, force=force, initial_delta=initial_pivots if
+                         initial_pivots == "auto" else None, quiet=quiet, source=out_path)
     if not np.all(np.isfinite(result.q)):
         raise InputError(f"{traj_path}: the simulation diverged; lower the setpoints or raise "
                          "--torque-limit")

@@ -2,17 +2,26 @@
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import click
 
-from ropod_sysid.cli.common import quiet_option, reports_errors
+from ropod_sysid.cli.common import (
+    POSITIVE_INT,
+    SEED,
+    Number,
+    given,
+    json_text,
+    positive,
+    quiet_option,
+    reports_errors,
+    writes,
+)
 from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform, load_platform
+from ropod_sysid.trajectory import MAX_HARMONICS, OPTIMIZE_DURATION, TYPICAL_MAX_DURATION
 
 OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
              "negated": "negated.csv", "mirrored_negated": "mirrored_negated.csv"}
@@ -21,15 +30,15 @@ OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
 def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
     """--v-max, --a-max, --w-max, --alpha-max, --pivot-rate-max/--no-pivot-limit, --floor."""
     options = [
-        click.option("--v-max", default=1.0, show_default=True, type=float,
+        click.option("--v-max", default=1.0, show_default=True, type=positive(),
                      help="Speed limit |v| [m/s]."),
-        click.option("--a-max", default=1.0, show_default=True, type=float,
+        click.option("--a-max", default=1.0, show_default=True, type=positive(),
                      help="Acceleration limit |a| of the base origin [m/s²]."),
-        click.option("--w-max", default=1.0, show_default=True, type=float,
+        click.option("--w-max", default=1.0, show_default=True, type=positive(),
                      help="Rotation rate limit |ω| [rad/s]."),
-        click.option("--alpha-max", default=1.0, show_default=True, type=float,
+        click.option("--alpha-max", default=1.0, show_default=True, type=positive(),
                      help="Rotational acceleration limit |ω̇| [rad/s²]."),
-        click.option("--pivot-rate-max", default=1.5, show_default=True, type=float,
+        click.option("--pivot-rate-max", default=1.5, show_default=True, type=positive(),
                      help="Pivot rate limit |δ̇| [rad/s] (keeps wheel flips out)."),
         click.option("--no-pivot-limit", is_flag=True,
                      help="Do not limit the pivot rates."),
@@ -47,10 +56,9 @@ def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
             pivot_rate_max: float, no_pivot_limit: bool) -> Any:
     from ropod_sysid.trajectory import Limits
 
-    for name, value in (("--v-max", v_max), ("--a-max", a_max), ("--w-max", w_max),
-                        ("--alpha-max", alpha_max), ("--pivot-rate-max", pivot_rate_max)):
-        if not (math.isfinite(value) and value > 0):
-            raise InputError(f"{name} {value:g}: must be a positive number")
+    if no_pivot_limit and given("pivot_rate_max"):
+        raise InputError(f"--pivot-rate-max {pivot_rate_max:g} and --no-pivot-limit: give one "
+                         "of them")
     return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max)
 
 
@@ -65,25 +73,13 @@ def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]
         raise InputError(f"--floor: {exc}") from None
 
 
-def _out_dir(out: str) -> Path:
-    path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory; give a directory")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"--out {out}: cannot create the directory ({exc.strerror or exc})"
-                         ) from None
-    return path
-
-
 def _write_variants(traj: Any, out: str) -> list[Path]:
+    """Write the run and its variants into ``out`` (made and checked by ``writes``)."""
     from ropod_sysid.trajectory import variants
 
-    folder = _out_dir(out)
     written = []
     for name, vt in variants(traj).items():
-        target = folder / OUT_FILES[name]
+        target = Path(out) / OUT_FILES[name]
         try:
             vt.write_csv(target)
         except OSError as exc:
@@ -110,21 +106,25 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
     func = click.option("--out", "out", required=True, type=click.Path(file_okay=False),
                         help="Directory for original.csv, mirrored.csv, negated.csv, "
                              "mirrored_negated.csv.")(func)
-    return click.option("--dt", default=0.005, show_default=True, type=float,
+    return click.option("--dt", default=0.005, show_default=True,
+                        type=Number(0, 0.1, low_open=True, unit="s"),
                         help="Setpoint sample interval [s].")(func)
 
 
 @command.command("typical", short_help="A typical run (corners, rotations, lateral moves).")
 @limit_options
-@click.option("--duration", default=60.0, show_default=True, type=float,
+@click.option("--duration", default=60.0, show_default=True,
+              type=Number(0, TYPICAL_MAX_DURATION, low_open=True, unit="s"),
               help="Length of the run [s].")
 @click.option("--platform", "platform_path", type=click.Path(dir_okay=False), default=None,
               help="Platform YAML for the pivot-rate prediction [default: the ropod].")
-@click.option("--seed", default=0, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=SEED,
               help="0: the reference run; other seeds vary speeds and lobe order.")
 @output_options
 @quiet_option
 @reports_errors
+@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
+        folder_files=OUT_FILES.values())
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                     pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
                     duration: float, platform_path: str | None, seed: int, dt: float, out: str,
@@ -133,10 +133,6 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
     from ropod_sysid.trajectory import typical
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
-    if not (math.isfinite(duration) and duration > 0):
-        raise InputError(f"--duration {duration:g}: must be a positive number of seconds")
-    if not (0 < dt <= 0.1):
-        raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
     traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
                    _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
     written = _write_variants(traj, out)
@@ -149,19 +145,23 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @limit_options
 @click.option("--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
               help="Platform YAML (geometry for the regressor and the pivot rates).")
-@click.option("--duration", default=30.0, show_default=True, type=float,
+@click.option("--duration", default=30.0, show_default=True,
+              type=Number(OPTIMIZE_DURATION[0], OPTIMIZE_DURATION[1], unit="s"),
               help="Length of the run [s].")
-@click.option("--harmonics", default=5, show_default=True, type=int,
+@click.option("--harmonics", default=5, show_default=True,
+              type=Number(1, MAX_HARMONICS, integer=True),
               help="Harmonics of each Fourier series.")
 @click.option("--objective", type=click.Choice(["cond", "logdet"]), default="cond",
               show_default=True,
               help="cond: least condition number; logdet: largest log-determinant.")
-@click.option("--seed", default=0, show_default=True, type=int, help="Random seed.")
-@click.option("--maxiter", default=25, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=SEED, help="Random seed.")
+@click.option("--maxiter", default=25, show_default=True, type=POSITIVE_INT,
               help="Generations of the search (differential evolution).")
 @output_options
 @quiet_option
 @reports_errors
+@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
+        folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                      pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
                      platform_path: str, duration: float, harmonics: int, objective: str,
@@ -170,10 +170,7 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
     from ropod_sysid.trajectory import optimize
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
-    if not (0 < dt <= 0.1):
-        raise InputError(f"--dt {dt:g}: must be in (0, 0.1] s")
     platform = load_platform(platform_path)
-    _out_dir(out)
     result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
                       _floor(floor), progress=not quiet, dt=dt)
     written = _write_variants(result.trajectory, out)
@@ -191,9 +188,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @click.option("--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
               help="Platform YAML (geometry).")
 @limit_options
-@click.option("--noise", default=1.0, show_default=True, type=float,
+@click.option("--noise", default=1.0, show_default=True, type=positive(),
               help="White noise σ on b_ID for the predicted standard deviations [N, N m].")
-@click.option("--log-rate", default=100.0, show_default=True, type=float,
+@click.option("--log-rate", default=100.0, show_default=True, type=positive("Hz"),
               help="Sample rate of the logs the fit will use [Hz].")
 @click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
               show_default=True, help="Friction coefficients per wheel or shared.")
@@ -203,6 +200,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="Plot of the path and the setpoints (.png or .svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @reports_errors
+@writes(outputs={"plot_path": "--plot"},
+        inputs={"traj_path": "TRAJ.csv", "platform_path": "--platform",
+                "params_path": "--params"})
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
                   floor: tuple[float, ...], noise: float, log_rate: float, friction: str,
@@ -213,10 +213,6 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
     from ropod_sysid.trajectory import check, plot, read_trajectory_csv
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
-    if not (math.isfinite(noise) and noise > 0):
-        raise InputError(f"--noise {noise:g}: must be a positive number")
-    if not (math.isfinite(log_rate) and log_rate > 0):
-        raise InputError(f"--log-rate {log_rate:g}: must be a positive number")
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
     platform = load_platform(platform_path)
@@ -231,7 +227,7 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
     if plot_path is not None:
         plot(traj, plot_path, fl, limits, platform)
     if as_json:
-        click.echo(json.dumps(report.to_dict(), indent=2, ensure_ascii=False))
+        click.echo(json_text(report.to_dict()))
     else:
         click.echo(report.text())
         if plot_path is not None:

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
-import json
-
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors
-from ropod_sysid.cli.fit import dask_option, workers_option
-from ropod_sysid.fit import fit_settings
+from ropod_sysid.cli.common import (
+    SpanType,
+    json_text,
+    platform_option,
+    quiet_option,
+    reports_errors,
+)
+from ropod_sysid.cli.fit import dask_option, split_gaps_option, workers_option
+from ropod_sysid.fit import fit_settings, parameters_of
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
@@ -23,14 +27,16 @@ from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
 @platform_option
 @click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
               help="Parameter file of a fit.")
-@click.option("--span", default=None, help="LOESS span: samples or seconds (default: the fit's).")
+@click.option("--span", type=SpanType(), default=None,
+              help="LOESS span: an odd number of samples or seconds (default: the fit's).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object for scripts.")
+@split_gaps_option
 @workers_option
 @dask_option
 @quiet_option
 @reports_errors
-def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: str | None,
-            as_json: bool, workers: int | None, dask_address: str | None,
+def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: Span | None,
+            as_json: bool, split_gaps: bool, workers: int | None, dask_address: str | None,
             quiet: bool) -> None:
     """Residual RMS per log and DOF, and the disturbance observer's view (eq. 40).
 
@@ -38,15 +44,17 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: s
     in parallel on Dask workers."""
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
-    params = DynamicParameters.from_mapping(pfile.values(), platform.unit_names, params_path)
+    _, values = parameters_of(pfile, platform, params_path)
+    params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
     file_span, delay, row_step = fit_settings(pfile, params_path)  # as the fit was made
-    sp = Span.parse(span) if span is not None else file_span
+    sp = span if span is not None else file_span
     results = validate_sources(list(logs), platform, params, sp, delay, workers=workers,
-                               dask_address=dask_address, row_step=row_step, quiet=quiet)
+                               dask_address=dask_address, row_step=row_step, quiet=quiet,
+                               split_gaps=split_gaps)
     if as_json:
-        click.echo(json.dumps({
+        click.echo(json_text({
             "params": params_path, "span": str(sp),
             "thresholds": {"force_N": FORCE_THRESHOLD, "torque_Nm": TORQUE_THRESHOLD},
-            "logs": [r.to_dict() for r in results]}, indent=2))
+            "logs": [r.to_dict() for r in results]}))
     else:
         click.echo(format_validation(results))

@@ -18,7 +18,7 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from ropod_sysid.errors import InputError
+from ropod_sysid.errors import InputError, one_line_warning
 from ropod_sysid.progress import Progress
 
 INSTALL_HINT = "pip install 'ropod-sysid[dask]'"
@@ -44,6 +44,12 @@ def _serial(func: Callable[..., Any], items: Sequence[Any], quiet: bool = True,
             out.append(func(item, **kwargs))
             bar.update()
     return out
+
+
+def _task(func: Callable[..., Any], item: Any, **kwargs: Any) -> Any:
+    """One task on a worker, whose warnings (e.g. numpy's) print as one line, as here."""
+    warnings.formatwarning = one_line_warning  # type: ignore[assignment]
+    return func(item, **kwargs)
 
 
 class DaskPool:
@@ -90,7 +96,8 @@ class DaskPool:
     def map(self, func: Callable[..., Any], items: Sequence[Any], **kwargs: Any) -> list:
         """``[func(item, **kwargs) for item in items]``, one task per item on the workers.
         A task's exception (e.g. :class:`InputError` for a bad log) is raised here."""
-        futures = self.client.map(func, list(items), pure=False, **kwargs)
+        futures = self.client.map(functools.partial(_task, func), list(items), pure=False,
+                                  **kwargs)
         try:
             return self.client.gather(futures)
         finally:

@@ -16,3 +16,10 @@ class InputError(Exception):
 
 class IdentifiabilityError(InputError):
     """The stacked regressor cannot determine anything (rank 0) or is otherwise unusable."""
+
+
+def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                     lineno: int, line: str | None = None) -> str:
+    """A :func:`warnings.formatwarning` that prints a warning (e.g. a damaged MCAP file read up
+    to the damage, or numpy's RuntimeWarning) as ``warning: <message>`` on one line."""
+    return f"warning: {' '.join(str(message).split())}\n"

@@ -12,18 +12,31 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import Friction, kind_of
+from ropod_sysid.params import DynamicParameters, Friction, kind_of, parameter_names
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, preprocess, triangles
-from ropod_sysid.solve import RCOND, Solution, Triangles, combined_rms, solve, stack_triangles
+from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles, usable_pieces
+from ropod_sysid.solve import (
+    RCOND,
+    Solution,
+    Triangles,
+    check_fixed,
+    check_rcond,
+    combined_rms,
+    solve,
+    stack_triangles,
+)
+
+if TYPE_CHECKING:
+    from ropod_sysid.plotdata import LogPlot
 
 WeightRotation = Literal["auto", "none"] | float
 
@@ -41,6 +54,21 @@ class FitOptions:
     rcond: float = RCOND
     max_delay: float = 0.05
     row_step: int | None = None  # samples between equation rows; None: ~10 per span
+    split_gaps: bool = False  # fit the pieces between gaps in time as separate logs
+
+    def __post_init__(self) -> None:
+        """Nonsense values are a one-line :class:`InputError` before any work."""
+        check_rcond(self.rcond)
+        if self.input_delay != "auto":
+            check_input_delay(float(self.input_delay),
+                              self.span.value if self.span.seconds else None)
+        if not (math.isfinite(self.max_delay) and self.max_delay > 0):
+            raise InputError(f"max_delay {self.max_delay:g}: must be a finite number of "
+                             "seconds > 0")
+        w = self.weight_rotation
+        if w not in ("auto", "none") and not (isinstance(w, int | float)
+                                               and math.isfinite(w) and w > 0):
+            raise InputError(f"--weight-rotation {w!r}: use auto, none or a finite number > 0")
 
 
 @dataclass
@@ -53,6 +81,7 @@ class LogFit:
     rms: dict[str, float]
     notes: list[str]
     triangles: Triangles = field(repr=False)
+    plot: LogPlot | None = field(default=None, repr=False)  # what the report draws of it
 
 
 @dataclass
@@ -80,6 +109,13 @@ class FitResult:
         sol = self.physical or self.solution
         return dict(zip(sol.names, map(float, sol.values), strict=True))
 
+    def fitted_parameters(self) -> DynamicParameters:
+        """The values the fit reports (the physically consistent ones if made) as a model's
+        parameters, e.g. to validate them on other logs."""
+        shown = self.physical.values if self.physical is not None else self.solution.values
+        return DynamicParameters.from_vector(shown, self.platform.unit_names,
+                                             self.options.friction)
+
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (data contract), with the fit's account in extras."""
         sol = self.solution
@@ -102,6 +138,7 @@ class FitResult:
             "row_step": self.options.row_step or "auto",
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
+            **({"split_gaps": True} if self.options.split_gaps else {}),
             "logs": [{"file": lf.source, "samples": lf.samples, "rows": lf.triangles.rows,
                       "rms": {"translation": lf.rms["translation"],
                               "rotation": lf.rms["rotation"]}} for lf in self.logs],
@@ -156,6 +193,44 @@ def fit_settings(pfile: ParameterFile, where: str) -> tuple[Span, float, int | N
     return _span_of(pfile, where), _delay_of(pfile, where), _row_step_of(pfile, where)
 
 
+def parameters_of(pfile: ParameterFile, platform: Platform, where: str,
+                  ) -> tuple[Friction, dict[str, float]]:
+    """The friction model and name → value of a fit's parameter file, for ``platform``.
+
+    Refused with a one-line :class:`InputError` naming ``where``: a file of another platform,
+    a ``friction`` other than per-wheel or shared, names that are no parameters of that model
+    and these units, values that are null, NaN or infinite, and parameters of the model that
+    are missing (a unit's friction left out would silently be 0).
+    """
+    if pfile.platform != platform.name:
+        raise InputError(f"{where}: the parameter file is for platform '{pfile.platform}', the "
+                         f"platform file describes '{platform.name}'; give the matching files")
+    values = pfile.values()
+    declared = pfile.extras.get("friction")
+    if declared is not None and declared not in ("per-wheel", "shared"):
+        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
+    friction: Friction = declared or (  # type: ignore[assignment]
+        "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel")
+    units = platform.unit_names
+    names = parameter_names(units, friction)
+    unknown = [k for k in values if k not in names]
+    if unknown:
+        raise InputError(
+            f"{where}: parameter(s) {', '.join(unknown[:6])} are not parameters of the "
+            f"{friction} friction model of units {', '.join(units)}; is this the parameter file "
+            "of this platform?")
+    bad = [k for k, v in values.items() if not math.isfinite(v)]
+    if bad:
+        raise InputError(f"{where}: parameter '{bad[0]}' is null, NaN or infinite; a parameter "
+                         "file gives a finite value for every parameter")
+    missing = [k for k in names if k not in values]
+    if missing:
+        raise InputError(f"{where}: parameter(s) {', '.join(missing[:6])}"
+                         f"{' …' if len(missing) > 6 else ''} missing; the {friction} friction "
+                         f"model of units {', '.join(units)} needs all of {len(names)}")
+    return friction, values
+
+
 def physical_bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of a physically consistent fit: masses and inertias ≥ 0; friction dissipative
     (roll friction ≤ 0 since it is added to the wheel torque, pivot friction ≥ 0; see params)."""
@@ -194,7 +269,8 @@ def mean_correlation(systems: Sequence[Triangles]) -> float:
     return sum(s.rows * s.correlation for s in systems) / rows if rows else 1.0
 
 
-Reduce = Callable[[float], list[tuple[str, Triangles, list[str]]]]
+# (delay, gather the report's plot data) -> per log: source, triangles, notes, plot data
+Reduce = Callable[[float, bool], list[tuple[str, Triangles, list[str], "LogPlot | None"]]]
 
 
 def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None = None,
@@ -202,20 +278,23 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
     """Fit the dynamic parameters to several in-memory logs stacked together (eqs. 36–38).
 
     Each log is preprocessed whole (:func:`ropod_sysid.regressor.preprocess`); for log files of
-    any length use :func:`fit_files`, which streams them.
+    any length use :func:`fit_files`, which streams them. With ``options.split_gaps`` a log
+    with gaps in time is fitted as its pieces (:func:`ropod_sysid.regressor.usable_pieces`).
     """
     options = options or FitOptions()
     if not logs:
         raise InputError("no logs given; pass one or more log files")
     model = PlatformModel(platform)
     say = progress or (lambda _msg: None)
+    if options.split_gaps:
+        logs = [p for log in logs for p in usable_pieces(log, options.span, options.row_step)]
 
-    def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
+    def reduce(delay: float, _plot: bool) -> list[tuple[str, Triangles, list[str], None]]:
         out = []
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
-            out.append((log.source, triangles(model, pre, options.friction), pre.notes))
+            out.append((log.source, triangles(model, pre, options.friction), pre.notes, None))
         return out
 
     return _fit(reduce, platform, options)
@@ -224,7 +303,8 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
 def fit_files(paths: Sequence[str | Path], platform: Platform,
               options: FitOptions | None = None, workers: int | None = None,
               dask_address: str | None = None, chunk: int | None = None,
-              progress: Callable[[str], None] | None = None, quiet: bool = True) -> FitResult:
+              progress: Callable[[str], None] | None = None, quiet: bool = True,
+              plots: bool = False) -> FitResult:
     """Fit the dynamic parameters to log files, each read and reduced in chunks.
 
     Every log is streamed (:func:`ropod_sysid.stream.stream_log`: memory bounded by ``chunk``
@@ -232,26 +312,33 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     result equals :func:`fit_logs` of the whole logs to rounding. With ``workers`` (a local
     Dask cluster of that many processes) or ``dask_address`` (an existing scheduler) each log
     is reduced on a worker and only the triangles come back. ``input_delay="auto"`` streams the
-    logs again for every delay it tries.
+    logs again for every delay it tries. A log listed twice is refused
+    (:func:`ropod_sysid.io.check_distinct`); with ``options.split_gaps`` a log with gaps in
+    time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`). With ``plots``
+    the last pass also gathers what the report draws of each log (:attr:`LogFit.plot`;
+    bounded size), so that a report needs no second reading of the logs.
     """
     from ropod_sysid.distributed import pool
-    from ropod_sysid.stream import DEFAULT_CHUNK, check_source, log_triangles
+    from ropod_sysid.stream import DEFAULT_CHUNK, check_source, piece_triangles
 
     options = options or FitOptions()
     if not paths:
         raise InputError("no logs given; pass one or more log files")
     paths = [str(p) for p in paths]
+    check_distinct(paths)
     for p in paths:
         check_source(p, platform)
     say = progress or (lambda _msg: None)
     with pool(workers, dask_address, quiet=quiet) as run:
-        def reduce(delay: float) -> list[tuple[str, Triangles, list[str]]]:
+        def reduce(delay: float, plot: bool) -> list[tuple[str, Triangles, list[str],
+                                                           LogPlot | None]]:
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
                 + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
-            parts = run(log_triangles, paths, platform=platform, span=options.span,
+            parts = run(piece_triangles, paths, platform=platform, span=options.span,
                         input_delay=delay, friction=options.friction,
-                        chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step)
-            return [(p, tri, notes) for p, (tri, notes) in zip(paths, parts, strict=True)]
+                        chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step,
+                        split_gaps=options.split_gaps, plot=plot and plots)
+            return [piece for pieces in parts for piece in pieces]
 
         return _fit(reduce, platform, options)
 
@@ -260,24 +347,31 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay."""
     model = PlatformModel(platform)
     names = model.parameter_names(options.friction)
+    check_fixed(options.fix, names)  # before the logs are read
     delay = 0.0
     if options.input_delay == "auto":
         def cost(d: float) -> float:
-            sol, _ = fit_systems([tri for _, tri, _ in reduce(d)], names, options)
+            sol, _ = fit_systems([tri for _, tri, _, _ in reduce(d, False)], names, options)
             return sol.sigma2
 
         from scipy.optimize import minimize_scalar  # imported here: only the delay search
 
-        res = minimize_scalar(cost, bounds=(0.0, options.max_delay),
+        top = min(options.max_delay, options.span.value) if options.span.seconds \
+            else options.max_delay  # at most one span (check_input_delay)
+        res = minimize_scalar(cost, bounds=(0.0, top),
                                              method="bounded", options={"xatol": 2e-4})
         delay = float(res.x)
     else:
         delay = float(options.input_delay)
-    reduced = reduce(delay)
-    systems = [tri for _, tri, _ in reduced]
+    reduced = reduce(delay, True)
+    for source, tri, _, _ in reduced:
+        if tri.torque_free():
+            raise InputError(f"{source}: the motor currents are all zero, so there is no torque "
+                             "to fit the parameters to; check the log's current columns")
+    systems = [tri for _, tri, _, _ in reduced]
     solution, weights = fit_systems(systems, names, options)
-    per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri)
-               for (source, tri, notes), w in zip(reduced, weights, strict=True)]
+    per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri, plot)
+               for (source, tri, notes, plot), w in zip(reduced, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log,
                        combined_rms(systems, solution.values), delay)
     if options.physical:

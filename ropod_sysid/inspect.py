@@ -20,6 +20,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import GAP_RULE, check_times
 from ropod_sysid.odometry import base_twist
 from ropod_sysid.platform import Platform
 
@@ -112,8 +113,9 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         coverage[u] = 10.0 * float(bins.size)
 
     reasons = []
-    if moving_time < c.min_moving:
-        reasons.append(f"only {moving_time:.1f} s of motion; record at least {c.min_moving:g} s")
+    short = motion_shortfall(moving_time, "of motion", c)
+    if short is not None:
+        reasons.append(short)
     for key, need, unit in (("vx", c.min_vx, "m/s"), ("vy", c.min_vy, "m/s"),
                             ("omega", c.min_omega, "rad/s")):
         lo, hi = vel_ranges[key]
@@ -131,6 +133,11 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         notes_w.append(f"{gap_idx.size} gap{'s' if gap_idx.size > 1 else ''} longer than "
                        f"{c.gap_factor:g}× the median interval, the longest "
                        f"{float(dt[worst]):.4g} s at t={float(t[worst]):.3f} s")
+    refused = check_times(t, log.source, gaps="allow").gaps if n else []
+    if refused:
+        notes_w.append(f"{len(refused)} of them the fit refuses ({GAP_RULE}): give fit, validate "
+                       f"and report --split-gaps to fit the {len(refused) + 1} pieces as "
+                       "separate logs")
     if dt_med > 0 and jitter > 0.1 * dt_med:
         notes_w.append(f"sample interval jitter {jitter:.3g} s is over 10% of the median "
                        f"{dt_med:.3g} s")
@@ -143,6 +150,17 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         velocity_ranges=vel_ranges, moving_time=moving_time, pivot_coverage=coverage,
         enough_to_fit=not reasons, reasons=reasons, warnings=notes_w,
     )
+
+
+def motion_shortfall(seconds: float, what: str = "of motion",
+                     criteria: Criteria | None = None) -> str | None:
+    """The verdict's first rule: why ``seconds`` (of motion, or ``what``) are too few to fit,
+    or None when they are enough (:attr:`Criteria.min_moving`). A fit checks its logs'
+    length with it: a log shorter than that cannot hold enough motion."""
+    c = criteria or Criteria()
+    if seconds < c.min_moving:
+        return f"only {seconds:.1f} s {what}; record at least {c.min_moving:g} s"
+    return None
 
 
 def _base_velocity(log: Log, platform: Platform, t: np.ndarray, dt_med: float,
@@ -172,7 +190,7 @@ def inspect_file(path: str | Path, platform: Platform,
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        log = read_log(path, platform)
+        log = read_log(path, platform, gaps="allow")  # gaps are a finding here
     return inspect_log(log, platform, criteria)
 
 

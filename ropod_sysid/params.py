@@ -133,6 +133,15 @@ class DynamicParameters:
                           "fpv": float(self.fpv.mean()), "fpc": float(self.fpc.mean())}
         return np.array([per_wheel[k] for k in names])
 
+    def check_physical(self, where: str = "<parameters>") -> None:
+        """Masses and inertias of a platform that can move: all ≥ 0, the base mass > 0 (a
+        simulation of anything else is no simulation); one-line :class:`InputError`."""
+        for k in INERTIAL:
+            v = float(getattr(self, k))
+            if not (v > 0 if k == "m_b" else v >= 0):
+                raise InputError(f"{where}: parameter '{k}' is {v:g} {UNITS_OF[k]}; the "
+                                 f"{DESCRIPTION[k]} must be {'> 0' if k == 'm_b' else '≥ 0'}")
+
     def without_friction(self) -> DynamicParameters:
         z2, z1 = np.zeros_like(self.fwv), np.zeros_like(self.fpv)
         return DynamicParameters(self.m_b, self.Jzz_b, self.m_wh, self.Jzz_wh, self.Jrot_w,

@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.yamlload import safe_load
 
 UNIT_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 UNIT_TYPES = ("swivel",)
@@ -162,9 +163,11 @@ def _number(data: dict[str, Any], key: str, where: str, default: float | None = 
         raise InputError(f"{where}: missing key '{key}'; add it (SI units, see the data contract)")
     value = data[key]
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{where}: key '{key}' must be a number, got {value!r}")
+        raise InputError(f"{where}: key '{key}' must be a number, got {value!r}; write a plain "
+                         "number in SI units (e.g. 0.05 or 5e-2)")
     if not math.isfinite(float(value)):
-        raise InputError(f"{where}: key '{key}' must be finite, got {value!r}")
+        raise InputError(f"{where}: key '{key}' must be finite, got {value!r}; give its value "
+                         "in SI units")
     return float(value)
 
 
@@ -190,7 +193,8 @@ def _unit(entry: Any, k: int, where: str) -> UnitSpec:
     utype = str(entry.get("type", "swivel"))
     if utype not in UNIT_TYPES:
         raise InputError(
-            f"{where}: '{key}.type' is {utype!r}; known unit types: {', '.join(UNIT_TYPES)}"
+            f"{where}: '{key}.type' is {utype!r}; known unit types: {', '.join(UNIT_TYPES)} — "
+            "use one of them (or leave 'type' out for swivel)"
         )
     left_motor = entry.get("left_motor", 1)
     if left_motor not in (1, 2):
@@ -217,23 +221,27 @@ def platform_from_dict(data: Any, where: str = "<platform>") -> Platform:
     dx = _number(data, "hub_com_offset", where, 0.0)
     k_t = _number(data, "torque_constant", where)
     alpha = _number(data, "friction_tanh_gain", where, 10.0)
-    if r_w <= 0:
-        raise InputError(f"{where}: 'wheel_radius' must be > 0, got {r_w}")
-    if d_w <= 0:
-        raise InputError(f"{where}: 'wheel_distance' must be > 0, got {d_w}")
+    for key, value, what in (("wheel_radius", r_w, "the wheel radius R_w in metres"),
+                             ("wheel_distance", d_w, "the distance d_w between the two wheels "
+                              "of a unit in metres"),
+                             ("torque_constant", k_t, "k_t in N m/A"),
+                             ("friction_tanh_gain", alpha, "alpha in s/rad")):
+        if value <= 0:
+            raise InputError(f"{where}: '{key}' must be > 0, got {value}; give {what}")
     if s_w == 0:
         raise InputError(
-            f"{where}: 'caster_offset' must be nonzero (the swivel model needs s_w ≠ 0)"
+            f"{where}: 'caster_offset' must be nonzero (the swivel model needs s_w ≠ 0); give "
+            "the distance from the pivot axis to the wheel axle in metres"
         )
-    if k_t <= 0:
-        raise InputError(f"{where}: 'torque_constant' must be > 0, got {k_t}")
-    if alpha <= 0:
-        raise InputError(f"{where}: 'friction_tanh_gain' must be > 0, got {alpha}")
     units_raw = data.get("units")
-    if not isinstance(units_raw, list):
+    if units_raw is None:
         raise InputError(f"{where}: missing key 'units' (a list of {{name, pivot}} entries)")
+    if not isinstance(units_raw, list):
+        raise InputError(f"{where}: 'units' must be a list of {{name, pivot}} entries, got "
+                         f"{units_raw!r}")
     if len(units_raw) < 2:
-        raise InputError(f"{where}: 'units' lists {len(units_raw)} unit(s); at least two needed")
+        raise InputError(f"{where}: 'units' lists {len(units_raw)} unit(s); at least two needed "
+                         "— list every wheel unit with its name and pivot")
     units = tuple(_unit(e, k, where) for k, e in enumerate(units_raw))
     seen: set[str] = set()
     for k, u in enumerate(units):
@@ -249,17 +257,25 @@ def load_platform(path: str | Path) -> Platform:
     """Read and validate a platform YAML file (safe loader only)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise InputError(f"{path}: no such platform file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read platform file ({exc.__class__.__name__})") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read platform file ({exc.strerror or exc})") from None
     try:
-        data = yaml.safe_load(text)
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise InputError(f"{path}: line {line} is not UTF-8 text; save the platform file as "
+                         "UTF-8") from None
+    try:
+        data = safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f" line {mark.line + 1}" if mark is not None else ""
-        raise InputError(f"{path}:{line} is not valid YAML; fix the syntax") from None
+        problem = getattr(exc, "problem", None)
+        why = f" ({' '.join(str(problem).split())})" if problem else ""
+        raise InputError(f"{path}:{line} is not valid YAML{why}; fix the syntax") from None
     return platform_from_dict(data, str(path))
 
 

@@ -20,6 +20,7 @@ the every-sample fit (tests/test_rows.py). ``step=1`` gives the sample-by-sample
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -28,6 +29,7 @@ import numpy as np
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import HEAD_STEPS, MIN_SAMPLES_PIECE, check_times, split_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import odometry_from
 from ropod_sysid.params import Friction
@@ -35,8 +37,9 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.solve import Triangles, qr_triangle
 
 DEFAULT_SPAN_S = 0.1
+MIN_SPAN_SAMPLES = 5  # the shortest LOESS window of a span given in samples
 QR_LEAF_ROWS = 256  # rows per leaf QR of a block's TSQR (small: fast, cache-resident)
-GRID_STEPS = 10_000  # the sample time comes from the first this many steps
+GRID_STEPS = HEAD_STEPS  # the sample time comes from the first this many steps
 UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
 ROWS_PER_SPAN = 10  # default row grid: about this many equation rows per smoother span
 
@@ -74,6 +77,63 @@ def jitter_note(source: str, max_step: float, min_step: float, dt: float) -> str
             f"resampled to a uniform {dt:.4g} s grid")
 
 
+class TooShort(InputError):
+    """A log (or a piece of one, with --split-gaps) too short for the smoother span."""
+
+
+def check_length(source: str, n: int, k: int, dt: float, trim: int) -> None:
+    """Enough samples ``n`` on the grid for a smoother span of ``k`` samples and the ``trim``
+    samples each end loses, else :class:`TooShort`."""
+    if n < 2 * trim + k:
+        raise TooShort(
+            f"{source}: {n} samples are too few for a smoother span of {k} samples "
+            f"({k * dt:.3g} s); record a longer run or use a shorter --span")
+
+
+def check_piece_samples(source: str, n: int) -> None:
+    """A piece between gaps needs a few samples to have a grid at all, else :class:`TooShort`."""
+    if n < MIN_SAMPLES_PIECE:
+        raise TooShort(f"{source}: only {n} sample{'s' if n != 1 else ''}")
+
+
+def left_out(exc: TooShort) -> str:
+    """The note of a piece too short to fit, left out (--split-gaps)."""
+    return f"{exc} — left out: a piece between gaps too short to fit"
+
+
+def no_piece_left(source: str, dropped: list[str]) -> InputError:
+    """The error of a log split at its gaps whose every piece is too short to fit."""
+    more = f"; and {len(dropped) - 3} more" if len(dropped) > 3 else ""
+    return InputError(f"{source}: every piece between the gaps in time is too short to fit "
+                      f"({'; '.join(dropped[:3])}{more}); record longer runs or use a shorter "
+                      "--span")
+
+
+def usable_pieces(log: Log, span: Span | None = None, row_step: int | None = None,
+                  ) -> list[Log]:
+    """A log (read with ``gaps="allow"``) split at its gaps
+    (:func:`ropod_sysid.io.timebase.split_log`): the pieces long enough for the smoother span,
+    the first one noting those left out (the criterion of :func:`preprocess` and of the
+    streamed pass: the samples on the piece's own grid); none left is an error."""
+    span = span or Span.parse(None)
+    kept, notes = [], []
+    for piece in split_log(log):
+        try:
+            check_piece_samples(piece.source, piece.n_samples)
+            dt = grid_step(piece.t)
+            n = piece.n_samples if on_grid(np.diff(piece.t), dt) else \
+                len(signals.resample_uniform(piece.t, piece.t, dt)[0])
+            k = span.samples(dt, n)
+            check_length(piece.source, n, k, dt, RowGrid.for_span(k, row_step).trim(k))
+            kept.append(piece)
+        except TooShort as exc:
+            notes.append(left_out(exc))
+    if not kept:
+        raise no_piece_left(log.source, notes)
+    kept[0].notes.extend(notes)
+    return kept
+
+
 @dataclass
 class Span:
     """Smoother span: a number of samples, or seconds (``"0.25s"``)."""
@@ -82,25 +142,37 @@ class Span:
     seconds: bool
 
     @classmethod
-    def parse(cls, text: str | float | None) -> Span:
+    def parse(cls, text: Span | str | float | None) -> Span:
+        """``None``: the default 0.1 s; ``"0.25s"``: seconds (finite, > 0); a bare number: a
+        count of samples, an odd whole number ≥ :data:`MIN_SPAN_SAMPLES` (LOESS needs a
+        centred window). Anything else is a one-line :class:`InputError`."""
+        if isinstance(text, Span):
+            return text
         if text is None:
             return cls(DEFAULT_SPAN_S, True)
-        if isinstance(text, int | float):
-            return cls(float(text), False)
         s = str(text).strip()
+        seconds = s.endswith("s")
         try:
-            if s.endswith("s"):
-                v = float(s[:-1])
-                if v <= 0:
-                    raise ValueError
-                return cls(v, True)
-            v = float(s)
-            if v <= 0:
-                raise ValueError
-            return cls(v, False)
+            v = float(s[:-1] if seconds else s)
         except ValueError:
-            raise InputError(f"--span {text!r}: give a positive number of samples (e.g. 21) or "
+            raise InputError(f"--span {text!r}: give an odd number of samples (e.g. 21) or "
                              "seconds (e.g. 0.1s)") from None
+        if seconds:
+            if not (math.isfinite(v) and v > 0):
+                raise InputError(f"--span {text!r}: seconds must be a finite number > 0, "
+                                 "e.g. 0.1s")
+            return cls(v, True)
+        if math.isfinite(v) and v.is_integer() and v >= MIN_SPAN_SAMPLES and v % 2 == 1:
+            return cls(v, False)
+        if not math.isfinite(v) or v <= 0:
+            hint = "e.g. 21 (samples) or 0.1s"
+        elif v < MIN_SPAN_SAMPLES:
+            hint = f"did you mean {s}s?"
+        else:
+            odd = 2 * math.floor((v - 1) / 2) + 1
+            hint = f"did you mean {odd} or {odd + 2}?"
+        raise InputError(f"--span {text!r}: a number without 's' is a count of samples and "
+                         f"must be an odd whole number ≥ {MIN_SPAN_SAMPLES}; {hint}")
 
     def samples(self, dt: float, n: int) -> int:
         """Odd window length k in samples for sample time ``dt`` and ``n`` samples."""
@@ -110,6 +182,22 @@ class Span:
 
     def __str__(self) -> str:
         return f"{self.value:g}s" if self.seconds else f"{int(self.value)} samples"
+
+
+def check_input_delay(delay: float, span_seconds: float | None = None) -> None:
+    """An input delay [s] is finite, ≥ 0 (the logged torques are only shifted later in time:
+    the motion lags the torque) and at most one smoother span ``span_seconds`` (a longer lag
+    is no transport delay; it pairs torques with unrelated motion)."""
+    if not math.isfinite(delay):
+        raise InputError(f"--input-delay {delay:g}: must be a finite number of seconds ≥ 0, "
+                         "e.g. 0.0025, or auto")
+    if delay < 0:
+        raise InputError(f"--input-delay {delay:g}: negative delays (motion ahead of the "
+                         "logged torque) are not supported; give a delay ≥ 0 s or auto")
+    if span_seconds is not None and delay > span_seconds:
+        raise InputError(f"--input-delay {delay:g}: longer than the smoother span "
+                         f"({span_seconds:.3g} s); give at most {span_seconds:.3g} s, auto, "
+                         "or a longer --span")
 
 
 @dataclass(frozen=True)
@@ -127,12 +215,22 @@ class RowGrid:
     def for_span(cls, k: int, step: int | None = None) -> RowGrid:
         """The grid for a smoother span of ``k`` samples: ``step`` samples apart, or by
         default ⌊k / :data:`ROWS_PER_SPAN`⌋ (at least 1)."""
-        if step is not None and (int(step) != step or step < 1):
-            raise InputError(f"--row-step {step!r}: give a positive whole number of samples "
-                             "(1 = every sample) or leave it out for about ten rows per span")
+        cls.check_step(step)
+        if step is not None and step > k:
+            raise InputError(f"--row-step {step}: more than the smoother span of {k} samples; "
+                             "rows farther apart than a span are not filtered like the samples "
+                             f"(eq. 36 on both sides); give at most {k}, auto, or a longer "
+                             "--span")
         d = int(step) if step is not None else max(1, k // ROWS_PER_SPAN)
         kr = max(int(round(k / d)), 3)
         return cls(d, kr if kr % 2 else kr + 1)
+
+    @staticmethod
+    def check_step(step: int | None) -> None:
+        """A row step is None (auto) or a positive whole number of samples."""
+        if step is not None and (int(step) != step or step < 1):
+            raise InputError(f"--row-step {step!r}: give a positive whole number of samples "
+                             "(1 = every sample) or leave it out for about ten rows per span")
 
     @property
     def halo(self) -> int:
@@ -206,6 +304,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     span = span or Span.parse(None)
     notes = list(log.notes)
     t = log.t
+    check_times(t, log.source)  # (a log read from a file was checked by its reader)
     delta = np.unwrap(log.delta, axis=0)
     phi, current = log.phi, log.current
     pose = log.pose
@@ -222,12 +321,10 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
         t = t_new
     n = len(t)
     k = span.samples(dt, n)
+    check_input_delay(input_delay, k * dt)
     grid = RowGrid.for_span(k, row_step)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
-    if n < 2 * trim + k:
-        raise InputError(
-            f"{log.source}: {n} samples are too few for a smoother span of {k} samples "
-            f"({k * dt:.3g} s); record a longer run or use a shorter --span")
+    check_length(log.source, n, k, dt, trim)
     delta_s = signals.loess(delta, k)
     phi_s = signals.loess(phi, k)
     if pose is None:
@@ -336,5 +433,6 @@ def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")
     tri.samples = len(pre.t) - 2 * pre.trim
+    tri.duration = (len(pre.t) - 1) * pre.dt
     tri.correlation = pre.grid.correlation
     return tri

@@ -12,11 +12,13 @@ more than one.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel, State
 from ropod_sysid.params import DynamicParameters
@@ -85,6 +87,47 @@ class Sensors:
     seed: int = 0
 
 
+MAX_DT = 1e-3  # the longest integration step of the simulate command [s]
+MIN_ENCODER_COUNTS = 16  # fewer counts per revolution leave no motion in the angles
+MAX_SEED = 2**32 - 1
+
+
+def check_run(rate: float, dt: float, controller: Controller, sensors: Sensors) -> None:
+    """The settings of :func:`simulate` make a log its readers accept: a one-line
+    :class:`InputError` naming the ``simulate`` option otherwise (before any work)."""
+    if not (math.isfinite(dt) and dt > 0):
+        raise InputError(f"--dt {dt:g}: the integration step must be a finite number > 0 s")
+    top = 1.0 / dt
+    if not (math.isfinite(rate) and 0 < rate <= top * (1 + 1e-9)):
+        raise InputError(f"--rate {rate:g}: must be a finite number in (0, {top:g}] Hz (at "
+                         "most the integration rate 1/--dt)")
+    stride = top / rate
+    if abs(stride - round(stride)) > 1e-9:
+        ok = ", ".join(f"{top / k:g}" for k in (1, 2, 4, 5, 10))
+        raise InputError(f"--rate {rate:g}: must divide the integration rate 1/--dt = {top:g} "
+                         f"Hz, e.g. {ok}")
+    j = sensors.jitter
+    if not (math.isfinite(j) and 0 <= j < 0.5 / rate):
+        raise InputError(f"--jitter {j:g}: must be a finite number in [0, {0.5 / rate:g}) s, "
+                         "less than half the sample step 1/--rate (a larger one reorders the "
+                         "samples)")
+    n = sensors.encoder_counts
+    if n is not None and not (int(n) == n and n >= MIN_ENCODER_COUNTS):
+        raise InputError(f"--encoder-counts {n}: must be a whole number ≥ "
+                         f"{MIN_ENCODER_COUNTS} counts per revolution (or left out for exact "
+                         "angles)")
+    if not (math.isfinite(sensors.current_noise) and sensors.current_noise >= 0):
+        raise InputError(f"--current-noise {sensors.current_noise:g}: must be a finite number "
+                         "≥ 0 A")
+    if not (int(sensors.seed) == sensors.seed and 0 <= sensors.seed <= MAX_SEED):
+        raise InputError(f"--seed {sensors.seed}: must be a whole number in [0, {MAX_SEED}]")
+    for name, value, low in (("--kp", controller.kp, 0.0), ("--ki", controller.ki, 0.0),
+                             ("--torque-limit", controller.torque_limit, None)):
+        if not (math.isfinite(value) and (value > 0 if low is None else value >= low)):
+            raise InputError(f"{name} {value:g}: must be a finite number "
+                             f"{'> 0' if low is None else '≥ 0'}")
+
+
 @dataclass
 class SimResult:
     """A simulated run: the log as the robot records it, and the truth at the log samples."""
@@ -134,16 +177,15 @@ def simulate(platform: Platform, params: DynamicParameters,
     runs = [setpoints] if isinstance(setpoints, Setpoints) else list(setpoints)
     controller = controller or Controller()
     sensors = sensors or Sensors()
+    check_run(rate, dt, controller, sensors)
+    params.check_physical()
     model = PlatformModel(platform)
     n_units = platform.n_units
     n_runs = len(runs)
     durations = np.array([r.duration for r in runs])
     t0 = np.array([r.t[0] for r in runs])
     steps = int(np.ceil(durations.max() / dt))
-    stride = 1.0 / (rate * dt)
-    if abs(stride - round(stride)) > 1e-9:
-        raise ValueError("the log rate must divide the integration rate (1/dt)")
-    stride = int(round(stride))
+    stride = int(round(1.0 / (rate * dt)))  # whole (check_run)
 
     if isinstance(initial_delta, str):
         delta0 = np.stack([initial_pivots(platform, r) for r in runs])

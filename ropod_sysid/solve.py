@@ -55,6 +55,7 @@ class Triangles:
     samples : log samples those rows cover (after trimming; ``rows`` × the row step)
     correlation : rows per independent row: the LOESS over the rows makes neighbours share
         their noise (1/Σh² of its kernel h, for a residual white before that filter)
+    duration : length of the log the rows come from [s]
     """
 
     r: np.ndarray
@@ -62,6 +63,7 @@ class Triangles:
     label: str = ""
     samples: int = 0
     correlation: float = 1.0
+    duration: float = 0.0
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
@@ -73,7 +75,12 @@ class Triangles:
         """Append another block of rows of the same system (streaming)."""
         r = np.stack([stack_triangles([self.r[d], other.r[d]]) for d in range(3)])
         return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples,
-                         self.correlation)
+                         self.correlation, self.duration + other.duration)
+
+    def torque_free(self) -> bool:
+        """Whether the rows move the platform (A ≠ 0) with no torque at all (b = 0): the motor
+        currents of the log are all zero."""
+        return bool(np.any(self.r[:, :, :-1]) and not np.any(self.r[:, :, -1]))
 
     def mean_square_b(self) -> np.ndarray:
         """Mean square of b_ID per DOF (3,): ‖b‖² = ‖R e_b‖² (column norms are kept)."""
@@ -153,6 +160,21 @@ class Solution:
         return out
 
 
+def check_rcond(rcond: float) -> None:
+    """``rcond`` is a finite number in (0, 1): 0 counts noise as identifiable, 1 nothing."""
+    if not (np.isfinite(rcond) and 0 < rcond < 1):
+        raise InputError(f"--rcond {rcond:g}: must be a finite number in (0, 1), e.g. {RCOND:g}")
+
+
+def check_fixed(fixed: Mapping[str, float], names: Sequence[str]) -> None:
+    """Fixed parameters are parameters of the model (``names``) with finite values."""
+    for k, v in fixed.items():
+        if k not in names:
+            raise InputError(f"--fix {k}: unknown parameter; known: {', '.join(names)}")
+        if not np.isfinite(v):
+            raise InputError(f"--fix {k}={v:g}: the value must be a finite number")
+
+
 def solve(r: np.ndarray, rows: int, names: Sequence[str],
           fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
           bounds: tuple[np.ndarray, np.ndarray] | None = None,
@@ -173,9 +195,8 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     names = list(names)
     p = len(names)
     fixed = dict(fixed or {})
-    for k in fixed:
-        if k not in names:
-            raise InputError(f"--fix {k}: unknown parameter; known: {', '.join(names)}")
+    check_rcond(rcond)
+    check_fixed(fixed, names)
     fix_idx = [names.index(k) for k in fixed]
     free = [j for j in range(p) if j not in fix_idx]
     m_fix = np.array([fixed[names[j]] for j in fix_idx])
@@ -255,6 +276,10 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
                                         method="bvls", lsmr_tol="auto")
         values[free] = res.x / scale
 
+    if not np.any(values[free]):
+        raise IdentifiabilityError(
+            "the solution is all zeros: nothing in the logs' torques needs the parameters "
+            "(are the motor currents all zero?); check the current columns of the logs")
     # of the identifiable part: σ_max over the smallest singular value kept
     cond = float(sv[0] / sv[rank - 1])
     return Solution(names, values, std, sv, rank, cond, null, combination, combinations, fixed,

@@ -26,6 +26,10 @@ give after the pass (:meth:`Triangles.mean_square_b`).
 
 :func:`validate_source` does the same for validation: the disturbance observer's causal
 low-pass keeps its filter state across blocks.
+
+The chunks' time base is checked as they come (:mod:`ropod_sysid.io.timebase`): a gap in time
+is an error, or with ``split_gaps`` (:func:`stream_pieces`) the end of one piece and the start
+of the next, each passed through steps 1–3 as a log of its own.
 """
 
 from __future__ import annotations
@@ -46,18 +50,33 @@ from threadpoolctl import threadpool_limits
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import (
+    Gaps,
+    TimeBase,
+    checked_chunks,
+    piece_name,
+    piece_note,
+    split_chunks,
+)
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_from
 from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
+from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
     GRID_STEPS,
     Preprocessed,
     RowGrid,
     Span,
+    TooShort,
     block_triangles,
+    check_input_delay,
+    check_length,
+    check_piece_samples,
     grid_step,
     jitter_note,
+    left_out,
+    no_piece_left,
     on_grid,
     row_inputs,
     row_system,
@@ -105,13 +124,14 @@ class StreamResult:
     dt: float
     span_samples: int
     observer: ObserverStats | None = field(default=None, repr=False)
+    plot: LogPlot | None = field(default=None, repr=False)  # what the report draws
 
 
 # ---------------------------------------------------------------------------------------------
 # chunk sources
 
 
-def _iter_path(path: Path, platform: Platform, chunk: int) -> Iterator[Log]:
+def _iter_path(path: Path, platform: Platform, chunk: int, gaps: Gaps) -> Iterator[Log]:
     name = path.name.lower()
     if name.endswith((".csv", ".csv.gz")):
         if name.endswith(".csv"):
@@ -121,16 +141,17 @@ def _iter_path(path: Path, platform: Platform, chunk: int) -> Iterator[Log]:
                 smartwheel = None  # type: ignore[assignment]
             if smartwheel is not None and _is_smartwheel(smartwheel, path):
                 # the robot's raw layout needs whole-log processing (frame checks, rates)
-                yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform), chunk)
+                yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform, gaps),
+                                     chunk)
                 return
         from ropod_sysid.io.csvlog import iter_csv_log
 
-        yield from iter_csv_log(path, platform, chunk)
+        yield from iter_csv_log(path, platform, chunk, gaps)
         return
     if name.endswith(".mcap"):
         from ropod_sysid.io.mcaplog import iter_mcap_log
 
-        yield from iter_mcap_log(path, platform, chunk)
+        yield from iter_mcap_log(path, platform, chunk, gaps)
         return
     suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
     raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
@@ -147,12 +168,14 @@ def _iter_log(log: Log, chunk: int) -> Iterator[Log]:
         yield log.slice(start, start + chunk)
 
 
-def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK) -> Iterator[Log]:
+def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
+                gaps: Gaps = "error") -> Iterator[Log]:
     """The samples of a log file (or an in-memory :class:`Log`) as consecutive logs of at most
-    ``chunk`` samples, read as they are needed."""
+    ``chunk`` samples, read as they are needed, their time base checked
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"`` lets gaps through)."""
     if isinstance(source, Log):
-        return _iter_log(source, chunk)
-    return _iter_path(Path(source), platform, chunk)
+        return checked_chunks(_iter_log(source, chunk), TimeBase(source.source, gaps=gaps))
+    return _iter_path(Path(source), platform, chunk, gaps)
 
 
 def source_name(source: Source) -> str:
@@ -241,7 +264,8 @@ def single_thread_blas() -> Iterator[None]:
 
 
 class _OffGrid(Exception):
-    """A step off the sample grid found after the head: the pass restarts, resampling."""
+    """A step off the sample grid found after the head of a log (of a piece of it, with
+    --split-gaps): the pass restarts, resampling that piece."""
 
 
 @dataclass
@@ -329,10 +353,7 @@ class _Grid:
         src = raw if self.tail is None else _Samples.join([self.tail, raw])
         lead = 0 if self.tail is None else len(self.tail) - 1
         steps = np.diff(src.t[lead:])
-        if steps.size:
-            if not steps.min() > 0:
-                raise InputError(f"{self.source}: time does not strictly increase; sort the "
-                                 "samples or remove repeated ones")
+        if steps.size:  # (time increases: iter_chunks checked it, ropod_sysid.io.timebase)
             self.max_step = max(self.max_step, float(steps.max()))
             self.min_step = min(self.min_step, float(steps.min()))
         if not self.resample:
@@ -413,7 +434,7 @@ class _Blocks:
     def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
                  keep_series: bool, row_step: int | None = None, threaded: bool = True,
-                 ) -> None:
+                 plot: bool = False) -> None:
         self.platform = platform
         self.model = PlatformModel(platform)
         self.span = span
@@ -424,6 +445,7 @@ class _Blocks:
         self.source = source
         self.params = params
         self.keep_series = keep_series
+        self.gather = PlotGather() if plot else None
         self.parts: list[_Samples] = []
         self.g0 = 0  # index of the first buffered sample
         self.avail = 0  # samples received
@@ -440,6 +462,7 @@ class _Blocks:
     def start(self, dt: float) -> None:
         self.dt = dt
         self.k = self.span.samples(dt, 0)
+        check_input_delay(self.delay, self.k * dt)
         self.c = (self.k - 1) // 2
         self.grid = RowGrid.for_span(self.k, self.row_step)
         self.halo = self.grid.halo
@@ -464,16 +487,13 @@ class _Blocks:
 
     def finish(self) -> tuple[Triangles, ObserverStats | None, int]:
         n = self.avail
-        k = self.k
-        if n < 2 * self.trim + k:
-            raise InputError(
-                f"{self.source}: {n} samples are too few for a smoother span of {k} samples "
-                f"({k * self.dt:.3g} s); record a longer run or use a shorter --span")
+        check_length(self.source, n, self.k, self.dt, self.trim)
         self._drain(n)
         self._wait(0)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
         self.tri.samples = n - 2 * self.trim
+        self.tri.duration = (n - 1) * self.dt
         self.tri.correlation = self.grid.correlation
         return self.tri, self.obs, n
 
@@ -564,6 +584,10 @@ class _Blocks:
         oa, ob = (0 if first else s), (r1 if last else e)
         if self.obs is not None:
             pa, pb = min(pa, oa), max(pb, ob)
+        if self.gather is not None:  # every sample once, as the observer sees them
+            jo, jp = slice(oa - r0, ob - r0), slice(oa - qa, ob - qa)
+            self.gather.push_samples(w.t[jo], q[jp], qd[jp], w.delta[jo],
+                                     self.platform.torque_constant * w.current[jo])
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
@@ -575,6 +599,9 @@ class _Blocks:
               last: bool) -> None:
         """The block's rows to its triangles, merged in order (and the observer's samples)."""
         a, b = row_system(self.model, pre, first, count, self.friction)
+        if self.gather is not None:
+            rows = first + self.grid.step * np.arange(count)
+            self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows])
         block = block_triangles(a, b, self.source)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
@@ -613,64 +640,173 @@ class _Blocks:
 # entry points
 
 
+class _Run:
+    """The pass over one log, or over one piece of it (--split-gaps)."""
+
+    def __init__(self, name: str, piece: int, first: int, resample: bool,
+                 blocks: _Blocks) -> None:
+        self.name = name
+        self.piece = piece
+        self.first = first  # the piece's first sample in the log
+        self.blocks = blocks
+        self.grid = _Grid(name, resample, blocks)
+        self.notes: list[str] = []
+        self.raw = 0  # samples read
+        self.t0 = self.t1 = 0.0
+
+    def push(self, log: Log) -> None:
+        if not self.raw:
+            self.t0 = float(log.t[0])
+        self.raw += log.n_samples
+        self.t1 = float(log.t[-1])
+        self.notes.extend(n for n in log.notes if n not in self.notes)  # (MCAP damage: last)
+        self.grid.push(log)
+
+    def finish(self) -> StreamResult:
+        notes = self.notes + self.grid.finish()
+        blocks = self.blocks
+        tri, obs, n = blocks.finish()
+        shown = None
+        if blocks.gather is not None:
+            shown = blocks.gather.result(self.raw, self.t1 - self.t0, bool(self.grid.has_pose),
+                                         blocks.dt, blocks.k, blocks.grid.step)
+        return StreamResult(self.name, tri, notes, n, blocks.dt, blocks.k, obs, shown)
+
+
 def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
-          resample: bool, prefetch: bool, row_step: int | None) -> StreamResult:
+          resample: bool, prefetch: bool, row_step: int | None, split_gaps: bool,
+          done: list[StreamResult | None], dropped: list[str], plot: bool = False) -> None:
+    """One pass over a log; with ``split_gaps`` over each piece between its gaps as a log of
+    its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
+    pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
+    ``resample`` puts the first of the others on the uniform grid from its start; ``plot``
+    gathers what the report draws of each piece."""
     name = source_name(source)
-    blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params, keep_series,
-                     row_step, threaded=prefetch)
+    restart = len(done)  # the piece the pass restarts at
+    chunks = iter_chunks(source, platform, chunk, "allow" if split_gaps else "error")
+    if prefetch and not isinstance(source, Log):
+        chunks = _prefetch(chunks)
+    if split_gaps:
+        chunks = split_chunks(chunks, name)
+    run: _Run | None = None
+    first = 0  # samples of the log before this chunk
+
+    def finish(run: _Run, last: bool) -> None:
+        if split_gaps and not (last and run.piece == 0):  # a log without gaps keeps its name
+            run.name = run.grid.source = run.blocks.source = piece_name(name, run.piece)
+        try:
+            check_piece_samples(run.name, run.raw)
+            res = run.finish()
+        except TooShort as exc:
+            if not split_gaps:
+                raise
+            done.append(None)
+            dropped.append(left_out(exc))
+            return
+        finally:
+            run.blocks.close()
+        if run.name != name:
+            res.triangles.label = run.name
+            res.notes.insert(0, piece_note(run.name, name, run.first, run.raw, run.t0, run.t1))
+        done.append(res)
+
     try:
-        grid = _Grid(name, resample, blocks)
-        notes: list[str] = []
-        chunks = iter_chunks(source, platform, chunk)
-        if prefetch and not isinstance(source, Log):
-            chunks = _prefetch(chunks)
         for log in chunks:
-            notes.extend(n for n in log.notes if n not in notes)  # (an MCAP's damage: last)
-            grid.push(log)
-        notes += grid.finish()
-        tri, obs, n = blocks.finish()
+            if log.piece >= len(done):
+                if run is not None and log.piece != run.piece:
+                    finish(run, last=False)
+                    run = None
+                if run is None:
+                    blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params,
+                                     keep_series, row_step, threaded=prefetch, plot=plot)
+                    run = _Run(name, log.piece, first, resample and log.piece == restart,
+                               blocks)
+                run.push(log)
+            first += log.n_samples
+        if run is not None:
+            finish(run, last=True)
+            run = None
     finally:
-        blocks.close()
-    return StreamResult(name, tri, notes, n, blocks.dt, blocks.k, obs)
+        if run is not None:
+            run.blocks.close()
+
+
+def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
+                  input_delay: float = 0.0, friction: Friction = "per-wheel",
+                  chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
+                  keep_series: bool = False, prefetch: bool = True,
+                  row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
+                  ) -> list[StreamResult]:
+    """:func:`stream_log`; with ``split_gaps`` a log with gaps in time
+    (:mod:`ropod_sysid.io.timebase`) gives one result per piece between them, each a log of
+    its own (its grid, its smoother ends), named ``run.csv[2]`` …; a piece too short for the
+    smoother span is left out with a note (on the first piece kept); none left is an error.
+    Without ``split_gaps`` a gap is an error. ``plot``: see :func:`stream_log`."""
+    span = span or Span.parse(None)
+    if chunk < 1:
+        raise InputError(f"chunk size {chunk}: must be a positive number of samples")
+    RowGrid.check_step(row_step)  # a bad row step fails before the file is opened
+    done: list[StreamResult | None] = []
+    dropped: list[str] = []
+    resample = False
+    with single_thread_blas():
+        while True:
+            try:
+                _pass(source, platform, span, input_delay, friction, chunk, params,
+                      keep_series, resample, prefetch, row_step, split_gaps, done, dropped,
+                      plot)
+                break
+            except _OffGrid:
+                # a step off the grid after the head: the log (piece) is jittered after all;
+                # again, on the uniform grid from its start
+                resample = True
+    kept = [r for r in done if r is not None]
+    if not kept:
+        raise no_piece_left(source_name(source), dropped)
+    kept[0].notes.extend(dropped)
+    return kept
 
 
 def stream_log(source: Source, platform: Platform, span: Span | None = None,
                input_delay: float = 0.0, friction: Friction = "per-wheel",
                chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                keep_series: bool = False, prefetch: bool = True,
-               row_step: int | None = None) -> StreamResult:
+               row_step: int | None = None, plot: bool = False) -> StreamResult:
     """One pass over a log (a file, or an in-memory :class:`Log`) in chunks of ``chunk``
     samples: its QR triangles per DOF, equal to ``triangles(model, preprocess(log, …))`` to
     rounding; with ``params`` also the disturbance observer's figures (``keep_series``: and
     its low-passed series, O(N) memory). ``row_step``: samples between equation rows
-    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span).
+    (:class:`ropod_sysid.regressor.RowGrid`; None: about ten per smoother span). ``plot``:
+    also gather what the report draws (:class:`ropod_sysid.plotdata.LogPlot`, bounded size).
 
     ``prefetch`` reads the next chunk in a background thread while one is processed, and
     reduces a block's rows in another while the next block is smoothed.
     """
-    span = span or Span.parse(None)
-    if chunk < 1:
-        raise InputError(f"chunk size {chunk}: must be a positive number of samples")
-    RowGrid.for_span(3, row_step)  # a bad row step fails before the file is opened
-    with single_thread_blas():
-        try:
-            return _pass(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, False, prefetch, row_step)
-        except _OffGrid:
-            # a step off the grid after the head: the log is jittered after all; again, on
-            # the uniform grid from the start
-            return _pass(source, platform, span, input_delay, friction, chunk, params,
-                         keep_series, True, prefetch, row_step)
+    return stream_pieces(source, platform, span, input_delay, friction, chunk, params,
+                         keep_series, prefetch, row_step, plot=plot)[0]
 
 
 def log_triangles(source: Source, platform: Platform, span: Span | None = None,
                   input_delay: float = 0.0, friction: Friction = "per-wheel",
                   chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
                   ) -> tuple[Triangles, list[str]]:
-    """A log's triangles and reading notes (the unit of work of a fit; runs on Dask workers)."""
+    """A log's triangles and reading notes."""
     res = stream_log(source, platform, span, input_delay, friction, chunk, row_step=row_step)
     return res.triangles, res.notes
+
+
+def piece_triangles(source: Source, platform: Platform, span: Span | None = None,
+                    input_delay: float = 0.0, friction: Friction = "per-wheel",
+                    chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
+                    split_gaps: bool = False, plot: bool = False,
+                    ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
+    """(name, triangles, reading notes, plot data) of a log, or of each of its pieces with
+    ``split_gaps`` (:func:`stream_pieces`): the unit of work of a fit, run on Dask workers.
+    ``plot``: also what the report draws (bounded size), else None."""
+    return [(r.source, r.triangles, r.notes, r.plot)
+            for r in stream_pieces(source, platform, span, input_delay, friction, chunk,
+                                   row_step=row_step, split_gaps=split_gaps, plot=plot)]
 
 
 def validate_source(source: Source, platform: Platform, params: DynamicParameters,
@@ -679,8 +815,24 @@ def validate_source(source: Source, platform: Platform, params: DynamicParameter
                     row_step: int | None = None) -> LogValidation:
     """:func:`ropod_sysid.validate.validate_log` of a log read in chunks. The observer series
     (``t``, ``f_hat``) are kept only with ``keep_series`` (they grow with the log)."""
-    res = stream_log(source, platform, span, input_delay, "per-wheel", chunk, params,
-                     keep_series, row_step=row_step)
+    return validate_pieces(source, platform, params, span, input_delay, chunk, keep_series,
+                           row_step)[0]
+
+
+def validate_pieces(source: Source, platform: Platform, params: DynamicParameters,
+                    span: Span | None = None, input_delay: float = 0.0,
+                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
+                    row_step: int | None = None, split_gaps: bool = False,
+                    ) -> list[LogValidation]:
+    """:func:`validate_source` of a log, or of each of its pieces with ``split_gaps``."""
+    return [_validation(res, platform, params)
+            for res in stream_pieces(source, platform, span, input_delay, "per-wheel", chunk,
+                                     params, keep_series, row_step=row_step,
+                                     split_gaps=split_gaps)]
+
+
+def _validation(res: StreamResult, platform: Platform, params: DynamicParameters,
+                ) -> LogValidation:
     obs = res.observer
     assert obs is not None
     m = params.vector(platform.unit_names, "per-wheel")
@@ -723,13 +875,17 @@ def validate_sources(sources: list[Source], platform: Platform, params: DynamicP
                      span: Span | None = None, input_delay: float = 0.0,
                      chunk: int = DEFAULT_CHUNK, workers: int | None = None,
                      dask_address: str | None = None, row_step: int | None = None,
-                     quiet: bool = True) -> list[LogValidation]:
-    """:func:`validate_source` for each log, on Dask with ``workers`` or ``dask_address``
-    (a progress bar over the logs unless ``quiet``)."""
+                     quiet: bool = True, split_gaps: bool = False) -> list[LogValidation]:
+    """:func:`validate_source` for each log (each of its pieces with ``split_gaps``), on Dask
+    with ``workers`` or ``dask_address`` (a progress bar over the logs unless ``quiet``)."""
     from ropod_sysid.distributed import pool
+    from ropod_sysid.io import check_distinct
 
+    check_distinct([s for s in sources if not isinstance(s, Log)])
     for src in sources:
         check_source(src, platform)
     with pool(workers, dask_address, quiet=quiet) as run:
-        return run(validate_source, sources, platform=platform, params=params, span=span,
-                   input_delay=input_delay, chunk=chunk, row_step=row_step)
+        parts = run(validate_pieces, sources, platform=platform, params=params, span=span,
+                    input_delay=input_delay, chunk=chunk, row_step=row_step,
+                    split_gaps=split_gaps)
+    return [v for pieces in parts for v in pieces]

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
 from ropod_sysid.fit import FitResult
+from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.params import UNITS_OF, kind_of
 from ropod_sysid.validate import LogValidation
 
@@ -40,16 +42,42 @@ def implausible(name: str, value: float) -> bool:
     return kind_of(name) in ("m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w") and value < 0
 
 
-def format_fit(result: FitResult) -> str:
-    """Parameter table, RMS per translation/rotation and per log, rank and condition."""
+def difference(value: float, std: float, other: float | None
+               ) -> tuple[float | None, float | None, float | None]:
+    """A fitted value against a compared one: (Δ = value − other, Δ/|other|, Δ/σ), each None
+    where it is undefined (no compared value, other = 0, no standard deviation)."""
+    if other is None or not math.isfinite(other):
+        return None, None, None
+    diff = value - other
+    return (diff, diff / abs(other) if other != 0 else None,
+            diff / std if math.isfinite(std) and std > 0 else None)
+
+
+def _comparison_cells(value: float, std: float, other: float | None) -> str:
+    diff, rel, z = difference(value, std, other)
+    shown = "" if other is None or not math.isfinite(other) else f"{other:.5g}"
+    return (f" {shown:>12} {'' if rel is None else f'{100 * rel:+.1f}%':>8}"
+            f" {'' if z is None else f'{z:+.2f}':>6}")
+
+
+def format_fit(result: FitResult, compare: ParameterFile | None = None,
+               compare_label: str | None = None) -> str:
+    """Parameter table, RMS per translation/rotation and per log, rank and condition; with
+    ``compare`` its values beside the fitted ones, the relative difference and Δ/σ."""
     sol = result.solution
     shown = result.physical.values if result.physical is not None else sol.values
     rel = relative_std(result)
+    other = compare.values() if compare is not None else {}
     lines = []
     head = "physically consistent fit" if result.physical is not None else "fit"
     lines.append(f"{head}: {len(result.logs)} log(s), {result.samples} samples, "
                  f"friction {result.options.friction}, span {result.options.span}")
-    lines.append(f"{'parameter':<10} {'value':>12} {'std':>10} {'rel.std':>8}  unit        note")
+    if compare is not None:
+        lines.append(f"compared with {compare_label or 'the comparison'}: Δ% = (value − "
+                     "compared)/|compared|, Δ/σ = (value − compared)/std")
+    columns = (f" {'compared':>12} {'Δ%':>8} {'Δ/σ':>6}" if compare is not None else "")
+    lines.append(f"{'parameter':<10} {'value':>12} {'std':>10} {'rel.std':>8}{columns}  "
+                 "unit        note")
     for j, name in enumerate(sol.names):
         notes = []
         if name in sol.fixed:
@@ -61,8 +89,14 @@ def format_fit(result: FitResult) -> str:
         std = "" if not np.isfinite(sol.std[j]) else f"{sol.std[j]:.4g}"
         rs = "" if not np.isfinite(rel[j]) else f"{100 * rel[j]:.1f}%"
         unit = UNITS_OF.get(kind_of(name), "")
-        lines.append(f"{name:<10} {shown[j]:>12.5g} {std:>10} {rs:>8}  {unit:<11} "
+        cells = (_comparison_cells(float(shown[j]), float(sol.std[j]), other.get(name))
+                 if compare is not None else "")
+        lines.append(f"{name:<10} {shown[j]:>12.5g} {std:>10} {rs:>8}{cells}  {unit:<11} "
                      + "; ".join(notes))
+    missing = [k for k in other if k not in sol.names]
+    if missing:
+        lines.append(f"not in this fit, only in {compare_label or 'the comparison'}: "
+                     + ", ".join(missing))
     lines.append(f"RMS residual: translation {result.rms['translation']:.4g} N, rotation "
                  f"{result.rms['rotation']:.4g} N m (all logs, unweighted)")
     if result.physical_rms is not None:

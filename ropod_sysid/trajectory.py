@@ -55,6 +55,9 @@ VARIANT_SIGNS: dict[str, tuple[float, float, float]] = {
     "negated": (-1.0, -1.0, -1.0),
     "mirrored_negated": (-1.0, 1.0, 1.0),
 }
+TYPICAL_MAX_DURATION = 3600.0  # typical(): the longest run [s] (an hour of driving)
+OPTIMIZE_DURATION = (5.0, 600.0)  # optimize(): shortest and longest run [s]
+MAX_HARMONICS = 20  # optimize(): most harmonics of each Fourier series
 SPIN_START_MIN = 30.0  # typical(): runs this long [s] or longer start with a rotation in place
 DESIGN_MARGIN = 0.9  # typical(): every limit is planned at 90 % of its value
 PIVOT_DESIGN_MARGIN = 0.8  # … and the pivot rate (quasi-steady) at 80 %
@@ -839,8 +842,9 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     """
     limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max)
     floor = _check_floor(floor)
-    if not (isinstance(duration, int | float) and math.isfinite(duration) and duration > 0):
-        raise InputError(f"duration must be a positive number of seconds, got {duration!r}")
+    if not (isinstance(duration, int | float) and 0 < duration <= TYPICAL_MAX_DURATION):
+        raise InputError(f"duration must be a number of seconds in (0, "
+                         f"{TYPICAL_MAX_DURATION:g}], got {duration!r}")
     if not (isinstance(dt, int | float) and 0 < dt <= 0.1):
         raise InputError(f"dt must be in (0, 0.1] s, got {dt!r}")
     if platform is None:
@@ -1664,10 +1668,13 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     floor = _check_floor(floor)
     if objective not in ("cond", "logdet"):
         raise InputError(f"unknown objective {objective!r}; use cond or logdet")
-    if isinstance(harmonics, bool) or not isinstance(harmonics, int) or not 1 <= harmonics <= 20:
-        raise InputError(f"harmonics must be an integer from 1 to 20, got {harmonics!r}")
-    if not (isinstance(duration, int | float) and 5.0 <= duration <= 600.0):
-        raise InputError(f"duration must be between 5 and 600 s, got {duration!r}")
+    if isinstance(harmonics, bool) or not isinstance(harmonics, int) \
+            or not 1 <= harmonics <= MAX_HARMONICS:
+        raise InputError(f"harmonics must be an integer from 1 to {MAX_HARMONICS}, got "
+                         f"{harmonics!r}")
+    lo, hi = OPTIMIZE_DURATION
+    if not (isinstance(duration, int | float) and lo <= duration <= hi):
+        raise InputError(f"duration must be between {lo:g} and {hi:g} s, got {duration!r}")
     if isinstance(maxiter, bool) or not isinstance(maxiter, int) or maxiter < 1:
         raise InputError(f"maxiter must be a positive integer, got {maxiter!r}")
     if friction not in ("per-wheel", "shared"):

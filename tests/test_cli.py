@@ -69,7 +69,7 @@ def test_fit_writes_each_format(files):
     node = next(iter(ros.values()))["ros__parameters"]
     assert node["base_kin_model"]["d_w"] == 0.08 and "m_b" in node["dyn_model"]
     out = d / "p.kelo"
-    r = run("fit", str(logs[0]), "--platform", str(d / "platform.yaml"), "--out", str(out),
+    r = run("fit", *map(str, logs[:2]), "--platform", str(d / "platform.yaml"), "--out", str(out),
             "--format", "kelo", "--quiet")
     assert r.exit_code == 0, r.output
     kelo = yaml.safe_load(out.read_text())

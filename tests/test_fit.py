@@ -204,7 +204,9 @@ def test_too_short_for_the_span(off_square, runs_off_square):
 
 def test_span_parsing():
     assert Span.parse("0.25s").samples(0.005, 1000) == 51
-    assert Span.parse("20").samples(0.005, 1000) == 21
+    assert Span.parse("21").samples(0.005, 1000) == 21
+    with pytest.raises(InputError, match="odd whole number ≥ 5; did you mean 19 or 21"):
+        Span.parse("20")  # a count of samples is odd (LOESS centres its window)
     assert Span.parse(None).samples(0.005, 1000) == 21
     with pytest.raises(InputError, match="--span 'abc'"):
         Span.parse("abc")

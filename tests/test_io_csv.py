@@ -266,6 +266,11 @@ def test_non_increasing_time(tmp_path, t_bad):
     fields[0] = t_bad
     lines[4] = ",".join(fields)
     p = write(tmp_path, lines)
+    if t_bad == "0.2":  # a duplicated timestamp is named as such
+        assert error_of(p) == (f"{p}: line 5: time t=0.2 repeats t=0.2 of line 4 (a duplicated "
+                               "timestamp); time must strictly increase — remove the repeated "
+                               "sample")
+        return
     assert error_of(p) == (f"{p}: line 5: time t={float(t_bad)!r} is not after t=0.2 on line 4; "
                            "time must strictly increase — sort the rows or remove repeated "
                            "samples")
@@ -351,8 +356,9 @@ def test_not_utf8_in_the_middle(tmp_path):
     p = tmp_path / "run.csv"
     lines = simple_lines(5)
     p.write_bytes(("\n".join(lines[:3]) + "\n").encode() + b"0.3\xff\xfe" + b",1" * 20 + b"\n")
-    assert error_of(p) == (f"{p}: line 4, column 't' has '0.3\ufffd\ufffd', which is not a "
-                           "number; fix the value or remove the line")
+    assert error_of(p) == (f"{p}: line 4, column 't' has bytes that are not UTF-8 text "
+                           "('0.3\ufffd\ufffd'); the file is damaged there — repair or remove "
+                           "the line")
 
 
 def test_errors_after_many_rows(tmp_path):

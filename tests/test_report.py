@@ -301,14 +301,14 @@ def test_report_command(files):
 
 
 def test_fit_with_report(files):
-    d, (log0, _, val) = files
+    d, (log0, log1, val) = files
     out = d / "fit-report.html"
-    r = run("fit", log0, "--platform", d / "platform.yaml", "--out", d / "p2.json",
+    r = run("fit", log0, log1, "--platform", d / "platform.yaml", "--out", d / "p2.json",
             "--report", out, "--compare", d / "truth.json", "--validate", val, "--quiet")
     assert r.exit_code == 0, r.output
     page = Page(out.read_text(encoding="utf-8"))
     assert {*SECTIONS, "validation"} <= page.ids
-    check_images(page, 2 + 3 + 1)
+    check_images(page, 2 * 2 + 3 + 1)  # two logs fitted (a 6 s log alone is too short)
     assert "truth.json" in " ".join(page.text)
 
 

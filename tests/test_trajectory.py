@@ -152,7 +152,7 @@ def test_typical_bad_settings_are_one_line_errors():
     ("t,vx,vy,omega\n0,0,0,0\n0.1,abc,0,0\n", r"line 3, column 'vx' has 'abc', which is not a"),
     ("t,vx,vy,omega\n0,0,0,0\n0.1,0,nan,0\n", r"line 3, column 'vy' is NaN"),
     ("t,vx,vy,omega\n0,0,0,0\n0.1,0,0,0\n0.1,0,0,0\n",
-     r"line 4: time t=0.1 is not after t=0.1 on line 3"),
+     r"line 4: time t=0.1 repeats t=0.1 of line 3 \(a duplicated timestamp\)"),
     ("t,vx,vy,omega,x\n0,0,0,0,0\n1,0,0,0,0\n", r"'y', 'theta' missing while 'x' present"),
     ("", r"empty"),
     ("t,vx,vy,omega\n0,0,0,0\n", r"only 1 data row"),

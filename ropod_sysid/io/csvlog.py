@@ -14,6 +14,7 @@ Line numbers in messages are 1-based lines of the file, the header being line 1.
 
 from __future__ import annotations
 
+import codecs
 import csv
 import gzip
 import math
@@ -28,7 +29,9 @@ import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
+from ropod_sysid.io.damage import check_gzip_start, is_gzip_name, read_error, reading
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import Gaps, Locate, TimeBase, check_order, check_times, checked_chunks
 from ropod_sysid.platform import Platform
 
 POSE_COLUMNS = ("x_b", "y_b", "theta_b")
@@ -56,13 +59,14 @@ def contract_columns(units: list[str]) -> list[str]:
 # reading
 
 
-def read_csv_log(path: str | Path, platform: Platform) -> Log:
+def read_csv_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
     """Read a contract CSV log for ``platform`` (``.csv``, or gzip-compressed ``.csv.gz``).
 
     Columns ``t``, ``delta_u``, ``phi_uL``, ``phi_uR``, ``cur_uL``, ``cur_uR`` for every unit
     ``u`` of the platform are required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
     none); other columns are ignored. Every problem raises :class:`InputError` with one line that
-    names the file, the line and/or column, and the fix.
+    names the file, the line and/or column, and the fix; so does a bad time base
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
     """
     where = str(path)
     path = Path(path)
@@ -75,35 +79,41 @@ def read_csv_log(path: str | Path, platform: Platform) -> Log:
         data = _diagnose(path, where, n_fields, wanted, col_idx)
 
     _check_rows(where, data.shape[1], MIN_SAMPLES)
-    _check_time(path, where, data[0])
+    check_times(data[0], where, _line_numbers(path), gaps)
     return _to_log(data, platform, pose_present, where)
 
 
 def iter_csv_log(path: str | Path, platform: Platform, chunk_rows: int = 50_000,
-                 ) -> Iterator[Log]:
+                 gaps: Gaps = "error") -> Iterator[Log]:
     """Read a contract CSV log (``.csv`` or ``.csv.gz``) as consecutive logs of ``chunk_rows``
     samples (the last one shorter), in memory bounded by the chunk size.
 
     The checks and messages are those of :func:`read_csv_log`, applied chunk by chunk with the
     file's line numbers: the header and columns before the first chunk; a row that Arrow
-    refuses, a NaN or infinite value, or time not increasing (also across chunks) raise
-    :class:`InputError` when the pass reaches them — chunks before it may already have been
-    yielded, so a consumer must not act on a partial pass. Too few rows raise at the end.
+    refuses, a NaN or infinite value, or a bad time base (:mod:`ropod_sysid.io.timebase`,
+    checked across chunks) raise :class:`InputError` when the pass reaches them — chunks
+    before it may already have been yielded, so a consumer must not act on a partial pass.
+    Too few rows raise at the end.
     """
     if chunk_rows < 1:
         raise ValueError(f"chunk_rows must be positive, got {chunk_rows}")
     where = str(path)
     path = Path(path)
-    n_fields, wanted, col_idx, pose_present = _layout(path, where, platform)
+    layout = _layout(path, where, platform)
+    tb = TimeBase(where, _line_numbers(path), gaps)
+    return checked_chunks(_csv_chunks(path, where, platform, chunk_rows, layout), tb)
+
+
+def _csv_chunks(path: Path, where: str, platform: Platform, chunk_rows: int,
+                layout: tuple[int, list[str], list[int], bool]) -> Iterator[Log]:
+    """The chunks of :func:`iter_csv_log` before the time checks."""
+    n_fields, wanted, col_idx, pose_present = layout
     rows = 0  # rows yielded
-    t_prev: float | None = None
     pending: list[np.ndarray] = []  # held back until there are enough rows for a log
 
     def emit(data: np.ndarray) -> Log:
-        nonlocal rows, t_prev
-        _check_time(path, where, data[0], rows, t_prev)
+        nonlocal rows
         rows += data.shape[1]
-        t_prev = float(data[0, -1])
         return _to_log(data, platform, pose_present, where)
 
     blocks = _stream_data(path, where, n_fields, wanted, col_idx, chunk_rows)
@@ -170,7 +180,7 @@ def _rechunk(blocks: Iterator[np.ndarray], rows: int) -> Iterator[np.ndarray]:
 def _check_rows_and_time(path: Path, where: str, t: np.ndarray, min_rows: int) -> None:
     """Enough data rows, and strictly increasing time (one-line errors with file lines)."""
     _check_rows(where, t.shape[0], min_rows)
-    _check_time(path, where, t)
+    check_order(t, where, _line_numbers(path))
 
 
 def _check_rows(where: str, n: int, min_rows: int) -> None:
@@ -183,23 +193,6 @@ def _check_rows(where: str, n: int, min_rows: int) -> None:
         raise InputError(
             f"{where}: only {n} data row{'s' if n != 1 else ''}; at least {min_rows} samples "
             "are needed — use a longer log"
-        )
-
-
-def _check_time(path: Path, where: str, t: np.ndarray, row0: int = 0,
-                t_prev: float | None = None) -> None:
-    """Time strictly increasing over data rows row0… (``t_prev``: the time of row row0 − 1)."""
-    ext = t if t_prev is None else np.concatenate([[t_prev], t])
-    first = row0 if t_prev is None else row0 - 1  # data row of ext[0]
-    steps = np.diff(ext)
-    bad = np.flatnonzero(~(steps > 0))
-    if bad.size:
-        k = int(bad[0])
-        lines = _data_row_lines(path, first + k + 2)
-        raise InputError(
-            f"{where}: line {lines[first + k + 1]}: time t={float(ext[k + 1])!r} is not after "
-            f"t={float(ext[k])!r} on line {lines[first + k]}; time must strictly increase — "
-            "sort the rows or remove repeated samples"
         )
 
 
@@ -270,15 +263,13 @@ def _open(path: Path, where: str, binary: bool = False):
 
 
 def _read_header(path: Path, where: str) -> list[str]:
-    with _open(path, where, binary=True) as f:
-        try:
-            raw = f.readline()
-            blank_file = not raw.strip() and not any(
-                chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
-            )
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+    with reading(path, where), _open(path, where, binary=True) as f:
+        raw = f.readline()
+        blank_file = not raw.strip() and not any(
+            chunk.strip() for chunk in iter(lambda: f.read(1 << 20), b"")
+        )
+    if is_gzip_name(path):
+        check_gzip_start(path, where)
     if not raw.strip():
         if blank_file:
             raise InputError(
@@ -301,6 +292,40 @@ def _read_header(path: Path, where: str) -> list[str]:
     except csv.Error as exc:
         raise InputError(f"{where}: line 1 (header) is not valid CSV ({exc})") from None
     return header
+
+
+def check_csv_lines(path: str | Path, n_fields: int, columns: dict[str, int]) -> None:
+    """Raise the :class:`InputError` of :func:`read_csv_log` for the first damaged line of a
+    CSV with a one-line header and ``n_fields`` fields per line, if any: a wrong field count,
+    or a value in ``columns`` (name → field index) that is empty, text, NaN or infinite.
+
+    For readers of other CSV layouts, to name the line when their own parse fails.
+    """
+    for _ in _diagnose_chunks(Path(path), str(path), n_fields, list(columns),
+                              list(columns.values())):
+        pass
+
+
+def check_csv_overflow(path: str | Path, columns: dict[str, int], rows: np.ndarray) -> None:
+    """Raise :class:`InputError` for the first of the data ``rows`` (0-based, in file order)
+    whose value in ``columns`` (name → field index) is written as a finite number but is too
+    large for a float (``1e400``) — for readers that keep spelled-out NaN and infinity (the
+    smart-wheel layout drops those frames) but must not take damaged digits for them."""
+    where = str(path)
+    wanted = set(np.asarray(rows).tolist())
+    if not wanted:
+        return
+    last = max(wanted)
+    finite_text = re.compile(_FINITE_RE)
+    for r, (line, rec) in enumerate(_records(Path(path), where)):
+        if r in wanted:
+            for name, k in columns.items():
+                text = rec[k].strip() if k < len(rec) else ""
+                if finite_text.match(text) and math.isinf(float(text)):
+                    raise InputError(f"{where}: line {line}, column '{name}' "
+                                     f"{_value_problem(text)}")
+        if r >= last:
+            return
 
 
 def _check_columns(names: list[str], required: list[str], platform: Platform,
@@ -417,8 +442,8 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
     parse_options = pacsv.ParseOptions(delimiter=",")
     convert_options = pacsv.ConvertOptions(column_types={c: pa.float64() for c in include},
                                            include_columns=include)
-    with _open(path, where, binary=True) as f:
-        try:
+    with _open(path, where, binary=True) as f:  # noqa: SIM117 - errors of reading, not opening
+        with reading(path, where):  # damaged gzip data, I/O errors
             f.readline()  # the header (one line, as _read_header reads it)
             rest = b""
             while True:
@@ -437,9 +462,6 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
                                        convert_options)
                 if not data:
                     return
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
 
 
 def _parse_piece(piece: bytes, include: list[str], read_options: pacsv.ReadOptions,
@@ -486,12 +508,8 @@ def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_i
 
 def _row_bytes(path: Path, where: str) -> int:
     """Bytes per data row, estimated from the first few rows (for Arrow's block size)."""
-    with _open(path, where, binary=True) as f:
-        try:
-            head = f.read(1 << 16)
-        except OSError as exc:
-            raise InputError(f"{where}: cannot read the log file ({exc.strerror or exc})") \
-                from None
+    with reading(path, where), _open(path, where, binary=True) as f:
+        head = f.read(1 << 16)
     lines = head.split(b"\n")[1:-1] or [head]
     return max(16, int(1.25 * max(len(ln) + 1 for ln in lines)))
 
@@ -551,7 +569,12 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
     yielded = 0
     row0 = 0
     last_data_line = 0
+    reader: pacsv.CSVStreamingReader | None = None
     try:
+        if not _valid_utf8(path, where):
+            # Arrow's handler of bad rows would fail to decode their text ("Exception
+            # ignored"): the csv module reads the bytes as U+FFFD instead
+            raise _NoLineNumbers
         reader = pacsv.open_csv(
             path,
             read_options=pacsv.ReadOptions(use_threads=False, column_names=arrow_names,
@@ -594,8 +617,17 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
                 data = np.array(
                     [pc.cast(pc.filter(cols[k], keep), pa.float64()).to_numpy() for k in col_idx],
                     dtype=np.float64).reshape(len(col_idx), -1)
+                nonfinite = ~np.isfinite(data)   # numbers too large for a float (1e400)
+                if nonfinite.any():
+                    r = int(np.flatnonzero(nonfinite.any(axis=0))[0])
+                    j = next(j for j in order if nonfinite[j, r])
+                    raw = batch.column(col_idx[j])[int(data_rows[r])].as_py()
+                    raise InputError(f"{where}: line {line_of(row0 - n + int(data_rows[r]))}, "
+                                     f"column '{wanted[j]}' {_value_problem(raw)}")
                 yielded += data.shape[1]
                 yield data
+    except OSError as exc:      # damaged gzip data (Arrow decompresses .gz itself)
+        raise read_error(path, where, exc) from None
     except (_NoLineNumbers, pa.ArrowException):
         # Arrow cannot even read it as text: the csv module, row by row (the rows already
         # yielded are skipped)
@@ -603,6 +635,11 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
         if rest.shape[1] > yielded:
             yield rest[:, yielded:]
         return
+    finally:
+        # stop Arrow's reader now, not when an error's traceback lets go of this frame (at
+        # interpreter exit its threads may be gone: "Exception ignored" or an abort)
+        if reader is not None:
+            reader.close()
     if invalid:
         raise count_error(last=len(invalid) == 1 and last_data_line < invalid[0][0])
 
@@ -611,9 +648,22 @@ class _NoLineNumbers(Exception):
     pass
 
 
+def _valid_utf8(path: Path, where: str) -> bool:
+    """Whether the whole file is UTF-8 text (one decoding pass, error path only)."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    with reading(path, where), _open(path, where, binary=True) as f:
+        try:
+            for block in iter(lambda: f.read(_DIAG_BLOCK), b""):
+                decoder.decode(block)
+            decoder.decode(b"", final=True)
+        except UnicodeDecodeError:
+            return False
+    return True
+
+
 def _records(path: Path, where: str) -> Iterator[tuple[int, list[str]]]:
     """Non-blank data records after the header, with the file line each starts on."""
-    with _open(path, where) as f:
+    with reading(path, where), _open(path, where) as f:
         reader = csv.reader(f, skipinitialspace=True)
         try:
             next(reader)
@@ -637,10 +687,17 @@ def _value_problem(text: str) -> str | None:
                "remove the line"
     if low in _NULLS:
         return f"is NaN ({s!r}); the log must be finite — repair or remove the line"
+    if "\ufffd" in s:   # undecodable bytes, read as U+FFFD
+        return (f"has bytes that are not UTF-8 text ({s!r}); the file is damaged there — "
+                "repair or remove the line")
     if not _NUMBER.match(s):
         return f"has {s!r}, which is not a number; fix the value or remove the line"
     if low.lstrip("+-") in ("inf", "infinity"):
         return f"is infinite ({s!r}); the log must be finite — repair or remove the line"
+    if math.isinf(float(s)):
+        shown = repr(s) if len(s) <= 24 else f"a number of {len(s)} characters ({s[:10]!r}…)"
+        return (f"has {shown}, which is too large for a float (it overflows to infinity); the "
+                "log must be finite — repair or remove the line")
     return None
 
 
@@ -684,6 +741,14 @@ def _slow_read(path: Path, where: str, n_fields: int, wanted: list[str],
             f"looks truncated; remove line {short[0]}"
         )
     return np.array(rows, dtype=np.float64).reshape(-1, len(col_idx)).T
+
+
+def _line_numbers(path: Path) -> Locate:
+    """``locate`` of :mod:`ropod_sysid.io.timebase` for a CSV log: the data rows' file lines."""
+    def locate(rows: Sequence[int]) -> list[str]:
+        lines = _data_row_lines(path, max(rows) + 1)
+        return [f"line {lines[r]}" for r in rows]
+    return locate
 
 
 def _data_row_lines(path: Path, count: int) -> list[int]:

@@ -29,6 +29,9 @@ class Log:
         File the log came from (for messages).
     notes : list[str]
         What reading did to the data (resampling, dropped frames, …), for the user.
+    piece : int
+        Which piece of the file, counted from 0, when a log split at its time gaps is read in
+        chunks (:func:`ropod_sysid.io.timebase.split_chunks`); else 0.
     """
 
     t: np.ndarray
@@ -39,6 +42,7 @@ class Log:
     pose: np.ndarray | None = None
     source: str = "<memory>"
     notes: list[str] = field(default_factory=list)
+    piece: int = 0
 
     @property
     def n_samples(self) -> int:
@@ -66,7 +70,7 @@ class Log:
         pose = None if self.pose is None else self.pose[start:stop]
         return Log(self.t[start:stop], list(self.units), self.delta[start:stop],
                    self.phi[start:stop], self.current[start:stop], pose, self.source,
-                   list(self.notes))
+                   list(self.notes), self.piece)
 
 
 def join_logs(parts: list[Log], notes: list[str] | None = None) -> Log:
@@ -80,4 +84,5 @@ def join_logs(parts: list[Log], notes: list[str] | None = None) -> Log:
 
     pose = None if first.pose is None else cat("pose")
     return Log(cat("t"), list(first.units), cat("delta"), cat("phi"), cat("current"), pose,
-               first.source, [n for p in parts for n in p.notes] if notes is None else notes)
+               first.source, [n for p in parts for n in p.notes] if notes is None else notes,
+               first.piece)

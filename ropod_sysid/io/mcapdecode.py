@@ -14,7 +14,9 @@ A batch of payloads (the messages of the log's channel, in file order) is decode
 The rows of a chunk then become a contract log (:func:`contract_log`): columns straight from
 the fixed layout or Arrow, or from the parsed JSON by one list per field, and the same
 per-message code as before when anything is unusual, so that errors and damage notes name
-the same message with the same words.
+the same message with the same words (a value that is no number, or too large for a float,
+by :func:`_json_value_problem`; a NaN or infinity by the field it is in). The time base of
+the logs is checked by the reader (:class:`ropod_sysid.io.timebase.TimeBase`).
 """
 
 from __future__ import annotations
@@ -32,11 +34,13 @@ import orjson
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.cdr import CONTRACT_ARRAYS, FixedLayout, contract_layout
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import message_numbers
 from ropod_sysid.platform import Platform
 
 MIN_SAMPLES = 3
 UNIT_FIELDS = ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
 POSE_FIELDS = ("x_b", "y_b", "theta_b")
+_FLOAT_MAX = int(np.finfo(np.float64).max)   # a larger JSON integer overflows a float
 
 
 @dataclass
@@ -202,24 +206,19 @@ def contract_log(rows: Rows, decoder: BatchDecoder, platform: Platform, where: s
 
 
 class ContractPieces:
-    """Rows of our layout → one log per chunk, time checked across the chunks."""
+    """Rows of our layout → one log per chunk (its time base is checked by the reader,
+    :class:`ropod_sysid.io.timebase.TimeBase`: sample k is message k, :attr:`locate`)."""
 
     def __init__(self, stream: Any, platform: Platform, where: str) -> None:
         self.decoder = contract_decoder(stream.encoding, stream.schema, stream.channel.topic,
                                         where, platform.unit_names)
         self.platform, self.where = platform, where
-        self.t_last: float | None = None
+        self.locate = message_numbers()
 
     def logs(self, rows: Rows | None, done: int, final: bool) -> Iterator[Log]:
         assert rows is not None     # (_check_recovered: a log has messages)
-        log = contract_log(rows, self.decoder, self.platform, self.where, offset=done,
+        yield contract_log(rows, self.decoder, self.platform, self.where, offset=done,
                            whole=final and done == 0)
-        if self.t_last is not None and not log.t[0] > self.t_last:
-            raise InputError(f"{self.where}: message {done}: time t={float(log.t[0])!r} is "
-                             f"not after t={self.t_last!r} of message {done - 1}; time must "
-                             "strictly increase")
-        self.t_last = float(log.t[-1])
-        yield log
 
 
 def _parse(payload: bytes) -> Any:
@@ -328,11 +327,36 @@ def _json_loop(decoded: list[Any], units: list[str], has_pose: bool, where: str,
             if pose is not None:
                 p = m["pose"]
                 pose[k] = (p["x_b"], p["y_b"], p["theta_b"])
-        except (KeyError, TypeError, ValueError) as exc:
+        except KeyError as exc:
             raise InputError(f"{where}: message {offset + k} lacks a log field "
                              f"({_field(exc)}); every message needs t and delta, phi_L, "
                              "phi_R, cur_L, cur_R of every unit") from None
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise InputError(f"{where}: message {offset + k} "
+                             f"{_json_value_problem(m, units, has_pose, exc)}") from None
     return t, vals, pose
+
+
+def _json_value_problem(m: Any, units: list[str], pose: bool, exc: BaseException) -> str:
+    """What is wrong with the first field of JSON message ``m`` that is not a number."""
+    paths = [("t",)] + [("units", u, f) for u in units for f in UNIT_FIELDS] \
+        + ([("pose", f) for f in POSE_FIELDS] if pose else [])
+    for path in paths:
+        v = m
+        try:
+            for key in path:
+                v = v[key]
+        except (KeyError, TypeError, IndexError):
+            return (f"lacks the log field {'.'.join(path)!r}; every message needs t and delta, "
+                    "phi_L, phi_R, cur_L, cur_R of every unit")
+        if isinstance(v, int) and not isinstance(v, bool) and abs(v) > _FLOAT_MAX:
+            return (f"has a number too large for a float in {'.'.join(path)} ({len(str(v))} "
+                    "digits; it overflows to infinity); the log must be finite — repair or cut "
+                    "the recording")
+        if not isinstance(v, int | float):
+            return (f"has {str(v)[:40]!r} in {'.'.join(path)}, which is not a number; repair or "
+                    "cut the recording")
+    return f"has a malformed log field ({type(exc).__name__}); repair or cut the recording"
 
 
 def _ros2_columns(rows: Rows, decoder: BatchDecoder, platform: Platform, where: str
@@ -388,18 +412,18 @@ def _checked(t: np.ndarray, vals: np.ndarray, pose: np.ndarray | None, platform:
         bad |= ~np.isfinite(pose).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise InputError(f"{where}: message {offset + k} has a NaN or infinite value; the log "
-                         "must be finite — repair or cut the recording")
+        units = platform.unit_names
+        named = [("t", t[k])] + [(f"units.{u}.{f}", vals[k, i, j]) for i, u in enumerate(units)
+                                 for j, f in enumerate(UNIT_FIELDS)]
+        if pose is not None:
+            named += [(f"pose.{f}", pose[k, j]) for j, f in enumerate(POSE_FIELDS)]
+        name, value = next((n, v) for n, v in named if not np.isfinite(v))
+        raise InputError(f"{where}: message {offset + k} has a NaN or infinite value ({name} = "
+                         f"{float(value)!r}); the log must be finite — repair or cut the "
+                         "recording")
     if whole and n < MIN_SAMPLES:
         raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
                          f"{MIN_SAMPLES} samples are needed — use a longer log")
-    steps = np.diff(t)
-    nonincr = np.flatnonzero(~(steps > 0))
-    if nonincr.size:
-        k = int(nonincr[0])
-        raise InputError(f"{where}: message {offset + k + 1}: time t={float(t[k + 1])!r} is "
-                         f"not after t={float(t[k])!r} of message {offset + k}; time must "
-                         "strictly increase")
     return Log(t=np.ascontiguousarray(t, dtype=np.float64), units=list(platform.unit_names),
                delta=np.ascontiguousarray(vals[:, :, 0]),
                phi=np.ascontiguousarray(vals[:, :, 1:3]),

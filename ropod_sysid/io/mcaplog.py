@@ -58,6 +58,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.mcapdecode import ContractPieces, Rows
+from ropod_sysid.io.timebase import Gaps, TimeBase, checked_chunks
 from ropod_sysid.platform import Platform
 
 try:  # the compressors mcap uses; their errors mean a broken chunk
@@ -544,39 +545,58 @@ def _no_data(scan: McapScan, where: str, what: str) -> InputError:
     return InputError(f"{where}: the MCAP file has {what}; no log messages to read")
 
 
-def read_mcap_log(path: str | Path, platform: Platform) -> Log:
+def read_mcap_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
     """Read an MCAP log (our layout, JSON or ROS 2, or the smart-wheel layout) for ``platform``.
 
     Damage stops reading: the messages before it are kept with a warning (``warnings.warn`` and
     ``Log.notes``) saying how many were recovered; with fewer than 3 recovered, or when the file
-    is no MCAP at all, :class:`InputError` (one line) is raised.
+    is no MCAP at all, :class:`InputError` (one line) is raised; so is a bad time base
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
     """
-    return join_logs(list(iter_mcap_log(path, platform, chunk=sys.maxsize)))
+    return join_logs(list(iter_mcap_log(path, platform, chunk=sys.maxsize, gaps=gaps)))
 
 
 BATCH = 8192     # payloads decoded at once
 
 
-def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> Iterator[Log]:
+def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000,
+                  gaps: Gaps = "error") -> Iterator[Log]:
     """:func:`read_mcap_log` as consecutive logs of at most ``chunk`` samples, in memory
     bounded by the chunk: a first pass over the records finds the channels, counts the
     messages and notes any damage (nothing is kept), a second decodes the chosen channel's
     messages a batch at a time (:mod:`ropod_sysid.io.mcapdecode`). The same checks and
-    messages as one piece, numbered in the whole file; the notes (damage, dropped smart-wheel
-    frames) and their warnings come with the last chunk.
+    messages as one piece, numbered in the whole file; the time base is checked as the chunks
+    come (:func:`ropod_sysid.io.timebase.checked_chunks`); the notes (damage, dropped
+    smart-wheel frames) and their warnings come with the last chunk, after its checks.
     """
     if chunk < 1:
         raise ValueError(f"chunk must be positive, got {chunk}")
     where = str(path)
     scan = scan_mcap(path, keep_messages=False)
     stream = pick_stream(scan, where)
-    cid = stream.channel.id
     if stream.layout == "contract":
         pieces: Any = ContractPieces(stream, platform, where)
     else:
         from ropod_sysid.io.swframes import SmartWheelPieces
 
         pieces = SmartWheelPieces(stream, platform, where, chunk)
+    tb = TimeBase(where, pieces.locate, gaps)
+    return _warned(checked_chunks(_chunks(path, chunk, scan, stream, pieces), tb))
+
+
+def _warned(logs: Iterator[Log]) -> Iterator[Log]:
+    """The chunks, each one's notes warned as it is handed on (time checked by then)."""
+    for log in logs:
+        for note in log.notes:
+            warnings.warn(note, stacklevel=2)
+        yield log
+
+
+def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces: Any
+            ) -> Iterator[Log]:
+    """The chunks of :func:`iter_mcap_log`, before the time checks."""
+    where = str(path)
+    cid = stream.channel.id
     damage = scan.damage
     pending: list[Rows] = []
     n_pending = 0
@@ -629,8 +649,6 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000) -> 
     if damage:
         last.notes.insert(0, _damage_note(decoded, scan.counts.get(cid, 0), damage, scan,
                                           where))
-    for note in last.notes:
-        warnings.warn(note, stacklevel=2)
     yield from out
 
 

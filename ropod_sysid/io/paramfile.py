@@ -48,6 +48,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.params import parameter_names
 from ropod_sysid.platform import Platform
+from ropod_sysid.yamlload import safe_load
 
 Format = Literal["json", "yaml", "ros2", "kelo"]
 FORMATS: tuple[str, ...] = ("json", "yaml", "ros2", "kelo")
@@ -359,7 +360,7 @@ def _load_mapping(path: Path, where: str, what: str) -> Any:
 
 def _yaml(text: str, where: str) -> Any:
     try:
-        return yaml.safe_load(text)
+        return safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f" line {mark.line + 1}:" if mark is not None else ""
@@ -488,6 +489,12 @@ def _finite_or_none(value: Any) -> float | None:
         return None
     value = float(value)
     return value if math.isfinite(value) else None
+
+
+def plain_data(value: Any) -> Any:
+    """Plain, strict-JSON-ready data: numpy scalars/arrays, tuples → float/int/list, paths →
+    text, NaN and infinities → None."""
+    return _plain(value)
 
 
 def _plain(value: Any, keep_nonfinite: bool = False) -> Any:

@@ -64,6 +64,7 @@ import pyarrow.csv as pacsv
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log, join_logs
+from ropod_sysid.io.timebase import Gaps, check_times
 from ropod_sysid.platform import Platform
 
 SW_TOPIC = "/sw_ethercat_parser/data"
@@ -200,7 +201,8 @@ def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
                 ts[k, i] = _ts_value(get(s, "sensor_ts"))
                 for j, name in enumerate(REQUIRED_FLOATS):
                     vals[j, k, i] = float(get(s, name))
-        except (KeyError, AttributeError, IndexError, TypeError, ValueError) as exc:
+        except (KeyError, AttributeError, IndexError, TypeError, ValueError,
+                OverflowError) as exc:
             if offset + k == 0:
                 raise InputError(_first_frame_problem(exc, m, n, platform, where, sensors_of,
                                                       get)) from None
@@ -243,11 +245,13 @@ def _first_frame_problem(exc: BaseException, m: Any, n: int, platform: Platform,
 
 def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | None = None, *,
                   voltage_range: tuple[float, float] = VOLTAGE_RANGE,
-                  warn: bool = True) -> Log:
+                  warn: bool = True, gaps: Gaps | None = None) -> Log:
     """The contract log of smart-wheel frames, with the platform's per-unit settings.
 
     Corrupt frames are dropped (see the module description) and reported in ``Log.notes`` (and
-    as a warning when ``warn``). Raises :class:`InputError` when fewer than 3 frames remain.
+    as a warning when ``warn``). Raises :class:`InputError` when fewer than 3 frames remain;
+    with ``gaps`` (the file readers give it) also for a bad time base of the kept frames
+    (:mod:`ropod_sysid.io.timebase`): a dropped frame leaves a step of two frames, no gap.
     """
     from ropod_sysid.io.swframes import FrameChecks
 
@@ -255,10 +259,13 @@ def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | Non
     checks = FrameChecks(platform, where, REQUIRED_FLOATS, voltage_range, frames.notes)
     first = checks.push(frames.sensor_ts, frames.values, frames.malformed)
     last, notes = checks.finish()
+    log = join_logs([p for p in (first, last) if p is not None], notes)
+    if gaps is not None:
+        check_times(log.t, where, checks.locate, gaps)
     if warn:
         for note in notes:
             warnings.warn(note, stacklevel=2)
-    return join_logs([p for p in (first, last) if p is not None], notes)
+    return log
 
 
 # ---------------------------------------------------------------------------------------------
@@ -275,8 +282,9 @@ def is_smartwheel_csv(path: str | Path) -> bool:
     return b"sensors.0." in first
 
 
-def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
-    """Read a CSV in the smart-wheel layout (columns ``sensors.<k>.<field>``) as a contract log."""
+def read_smartwheel_csv(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
+    """Read a CSV in the smart-wheel layout (columns ``sensors.<k>.<field>``) as a contract log
+    (``gaps``: see :func:`frames_to_log`)."""
     where = str(path)
     path = Path(path)
     try:
@@ -318,7 +326,21 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
                                                  include_columns=list(types)),
         )
     except (pa.ArrowException, ValueError, OSError) as exc:
+        from ropod_sysid.io.csvlog import check_csv_lines
+
+        # name the line (field count, text, overflow) as the contract reader does
+        check_csv_lines(path, len(names), {names[int(c[1:])]: int(c[1:]) for c in types})
         msg = " ".join(str(exc).split())
+        bad_ts = re.search(r"column #(\d+): CSV conversion error to uint64: invalid value '(.*)'",
+                           msg)
+        if bad_ts and int(bad_ts.group(1)) < len(names):    # e.g. too many digits
+            k, value = int(bad_ts.group(1)), bad_ts.group(2)
+            line = _line_with(path, k, value)
+            shown = value if len(value) <= 24 else f"{value[:12]}… ({len(value)} digits)"
+            raise InputError(
+                f"{where}: line {line}, column '{names[k]}' has {shown!r}, which is not a "
+                f"whole number of nanoseconds from 0 to 2^64 − 1; fix the value or remove the "
+                "line") from None
         msg = re.sub(r"column #(\d+)",
                      lambda mm: f"column '{names[int(mm.group(1))]}'"
                      if int(mm.group(1)) < len(names) else mm.group(0), msg)
@@ -337,11 +359,27 @@ def read_smartwheel_csv(path: str | Path, platform: Platform) -> Log:
         ts[:, k] = table.column(f"c{present[(k, 'sensor_ts')]}").to_numpy()
         for name in REQUIRED_FLOATS:
             vals[name][:, k] = table.column(f"c{present[(k, name)]}").to_numpy()
+    nonfinite = ~np.isfinite(np.stack(list(vals.values()))).all(axis=(0, 2))
+    if nonfinite.any():   # spelled-out NaN/inf frames are dropped below, damaged digits are not
+        from ropod_sysid.io.csvlog import check_csv_overflow
+
+        check_csv_overflow(path, {names[int(c[1:])]: int(c[1:]) for c in types},
+                           np.flatnonzero(nonfinite))
     notes = []
     if count > n:
         notes.append(extra_sensors_note(where, count, platform))
     frames = SmartWheelFrames(ts, vals, np.zeros(n_rows, dtype=bool), where, notes)
-    return frames_to_log(frames, platform, where)
+    return frames_to_log(frames, platform, where, gaps=gaps)
+
+
+def _line_with(path: Path, k: int, value: str) -> int:
+    """The file line of the first record whose field ``k`` is ``value`` (error path only)."""
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
+        reader = csv.reader(f)
+        for rec in reader:
+            if len(rec) > k and rec[k].strip() == value:
+                return reader.line_num
+    return 0  # pragma: no cover - Arrow named a value that is in the file
 
 
 def read_smartwheel(path: str | Path, platform: Platform) -> Log:

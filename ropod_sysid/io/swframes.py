@@ -8,14 +8,16 @@ first kept clock value (t counts from it), the unwrapping state of every encoder
 (:func:`ropod_sysid.odometry.unwrap_from`, bit-identical to one ``np.unwrap``), the pivot
 branch chosen at the first kept sample, and for the note the counts and the first frames of
 every reason with the kept frames around them. The samples equal those of the whole log bit
-for bit, and the note is the same.
+for bit, and the note is the same. The runs of consecutive kept frames are recorded, so that
+the time checks of the samples (:mod:`ropod_sysid.io.timebase`) name their frames
+(:meth:`FrameChecks.locate`).
 """
 
 from __future__ import annotations
 
 import math
-from bisect import bisect_left
-from collections.abc import Iterator
+from bisect import bisect_left, bisect_right
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -103,6 +105,24 @@ class FrameChecks:
         self.ts0: np.uint64 | None = None
         self.unwrap: dict[str, np.ndarray] = {}     # encoder → (last raw, correction) (2, n)
         self.branch: np.ndarray | None = None
+        self.run_samples: list[int] = []            # the runs of consecutive kept frames:
+        self.run_frames: list[int] = []             # first sample and first frame of each
+
+    def locate(self, samples: Sequence[int]) -> list[str]:
+        """The kept frames of samples (a ``locate`` of :mod:`ropod_sysid.io.timebase`)."""
+        out = []
+        for s in samples:
+            j = bisect_right(self.run_samples, s) - 1
+            out.append(f"frame #{self.run_frames[j] + s - self.run_samples[j]}")
+        return out
+
+    def _runs(self, index: np.ndarray) -> None:
+        """Record where the kept frames ``index`` (the next samples) skip frames."""
+        starts = np.flatnonzero(np.diff(index) != 1) + 1
+        if self.last_kept is None or int(index[0]) != self.last_kept[0] + 1:
+            starts = np.concatenate([[0], starts])
+        self.run_samples += (starts + self.n_kept).tolist()
+        self.run_frames += index[starts].tolist()
 
     def _count(self, reason: int, frames: np.ndarray) -> None:
         """Count the ``frames`` (numbers, ascending) dropped for ``reason``."""
@@ -162,6 +182,7 @@ class FrameChecks:
             self.ts0 = ts[0, 0]
         rel_ns = (ts[:, 0] - self.ts0).astype(np.int64)  # integer subtraction, then seconds
         t = rel_ns.astype(np.float64) / 1e9
+        self._runs(index)
         self._resolve_times(index, t)
         self.n_kept += index.size
         v = dict(zip(self.fields, floats, strict=True))
@@ -340,6 +361,7 @@ class SmartWheelPieces:
                                           where)
         self.checks = FrameChecks(platform, where, REQUIRED_FLOATS, VOLTAGE_RANGE)
         self.platform, self.where, self.chunk = platform, where, chunk
+        self.locate = self.checks.locate
         self.out: list[Log] = []
         self.n_out = 0
 

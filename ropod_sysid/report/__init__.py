@@ -10,8 +10,12 @@ A report needs a :class:`~ropod_sysid.fit.FitResult`. Without refitting, one is 
 parameter file by :func:`result_from_parameter_file`: the file's values and standard deviations,
 with the residuals, singular values, rank and null space of the given logs.
 
-What is computed always uses every sample; only what is plotted is decimated
-(:mod:`ropod_sysid.report.figures`).
+What is computed (parameters, RMS per log and DOF, singular values) always uses every row, from
+the logs' triangles; what is plotted is gathered while each log streams, in bounded memory
+(:mod:`ropod_sysid.plotdata`: min/max envelopes of the inputs, every s-th equation row for the
+fit, its error, histograms and the error against velocity) and decimated for drawing
+(:mod:`ropod_sysid.report.figures`). A log is read once, by the fit or by
+:func:`result_from_parameter_file`.
 """
 
 from __future__ import annotations
@@ -36,28 +40,28 @@ from ropod_sysid.fit import (
     fit_settings,
     fit_systems,
     mean_correlation,
+    parameters_of,
 )
+from ropod_sysid.io import check_distinct
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
-from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
-    INERTIAL,
     UNITS_OF,
-    DynamicParameters,
-    Friction,
     kind_of,
     parameter_names,
 )
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, preprocess, system, triangles
+from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
 from ropod_sysid.solve import combined_rms
-from ropod_sysid.summary import identifiability_verdict, implausible, relative_std
+from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
+from ropod_sysid.summary import difference, identifiability_verdict, implausible, relative_std
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
 
-__all__ = ["render_fit_report", "result_from_parameter_file", "write_fit_report"]
+__all__ = ["read_comparison", "render_fit_report", "result_from_parameter_file",
+           "write_fit_report"]
 
 WEAK_RELATIVE_STD = 0.2  # the summary's threshold for "weakly determined"
 
@@ -66,9 +70,9 @@ WEAK_RELATIVE_STD = 0.2  # the summary's threshold for "weakly determined"
 # a FitResult from a parameter file (no refit)
 
 
-def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: ParameterFile,
+def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile: ParameterFile,
                                span: Span | None = None, where: str = "<parameters>",
-                               ) -> tuple[FitResult, list[str]]:
+                               split_gaps: bool = False) -> tuple[FitResult, list[str]]:
     """What a report needs, from a parameter file and logs, without refitting.
 
     The values and standard deviations are the file's; the per-log and total residual RMS are
@@ -77,37 +81,19 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     of these logs is computed for that, but its values are not shown). The friction model,
     span (unless ``span`` is given), input delay and fixed parameters come from the file.
 
-    Returns the result and notes for the reader (e.g. friction coefficients missing in the file).
+    ``logs`` are in-memory logs or log files; each is streamed once (:mod:`ropod_sysid.stream`),
+    gathering also what the report draws of it (:attr:`LogFit.plot`); with ``split_gaps`` each
+    piece between gaps in time is a log of its own (:func:`ropod_sysid.stream.stream_pieces`).
+
+    The file is checked first (:func:`ropod_sysid.fit.parameters_of`). Returns the result and
+    notes for the reader (e.g. that the values are those of a bounded fit).
     """
     if not logs:
         raise InputError("no logs given; pass one or more log files")
-    units = platform.unit_names
-    values = pfile.values()
     stds = pfile.stds()
     notes: list[str] = []
-    friction = _friction_of(pfile, values, where)
-    names = parameter_names(units, friction)
-    unknown = [k for k in values if k not in names]
-    if unknown:
-        raise InputError(
-            f"{where}: parameter(s) {', '.join(unknown[:6])} are not parameters of the "
-            f"{friction} friction model of units {', '.join(units)}; is this the parameter file "
-            "of this platform?")
-    for k in INERTIAL:
-        if k not in values:
-            raise InputError(f"{where}: parameter '{k}' is missing; a parameter file gives all "
-                             f"of {', '.join(INERTIAL)}")
-    bad = [k for k, v in values.items() if not math.isfinite(v)]
-    if bad:
-        raise InputError(f"{where}: parameter '{bad[0]}' has no finite value")
-    missing = [k for k in names if k not in values]
-    if missing:
-        notes.append(f"{len(missing)} friction coefficient(s) missing in the parameter file "
-                     f"({', '.join(missing[:4])}{'…' if len(missing) > 4 else ''}) are taken "
-                     "as 0")
-    if pfile.platform != platform.name:
-        notes.append(f"the parameter file is for platform '{pfile.platform}', the platform "
-                     f"file describes '{platform.name}'")
+    friction, values = parameters_of(pfile, platform, where)
+    names = parameter_names(platform.unit_names, friction)
     file_span, delay, row_step = fit_settings(pfile, where)
     span = span if span is not None else file_span
     fixed = {k: values[k] for k in names
@@ -119,13 +105,13 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
     options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
                          row_step=row_step)
 
-    model = PlatformModel(platform)
-    systems = []
-    log_notes = []
+    check_distinct([log for log in logs if not isinstance(log, Log)])
     for log in logs:
-        pre = preprocess(log, platform, span, delay, row_step)
-        log_notes.append(pre.notes)
-        systems.append(triangles(model, pre, friction))
+        check_source(log, platform)
+    streamed = [res for log in logs
+                for res in stream_pieces(log, platform, span, delay, friction,
+                                         row_step=row_step, split_gaps=split_gaps, plot=True)]
+    systems = [res.triangles for res in streamed]
     sol, weights = fit_systems(systems, names, options)
 
     m = np.array([values.get(k, 0.0) for k in names])
@@ -142,8 +128,8 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
             combinations[k] = f"{sol.combinations.get(k, '')} (with these logs)"
     solution = dataclasses.replace(sol, values=m, std=std, combination=combination,
                                    combinations=combinations, fixed=fixed)
-    per_log = [LogFit(log.source, s.samples, w, s.rms(m), n, s)
-               for log, s, w, n in zip(logs, systems, weights, log_notes, strict=True)]
+    per_log = [LogFit(res.source, res.triangles.samples, w, res.triangles.rms(m), res.notes,
+                      res.triangles, res.plot) for res, w in zip(streamed, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log, combined_rms(systems, m), delay)
     if pfile.extras.get("physical") is True:
         notes.append("the values are those of a physically consistent (bounded) fit")
@@ -155,15 +141,6 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Log], pfile: P
                      f"{file_rms[1]:.4g} N m on the logs it was fitted to; on these logs it is "
                      f"{here[0]:.4g} N / {here[1]:.4g} N m")
     return result, notes
-
-
-def _friction_of(pfile: ParameterFile, values: dict[str, float], where: str) -> Friction:
-    declared = pfile.extras.get("friction")
-    if declared in ("per-wheel", "shared"):
-        return declared  # type: ignore[return-value]
-    if declared is not None:
-        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
-    return "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -224,58 +201,50 @@ def _verdict_class(text: str) -> str:
     return "warn"
 
 
-def _dof_rms(err: np.ndarray) -> dict[str, float]:
-    if err.shape[0] == 0:
-        return {k: float("nan") for k in ("x", "y", "theta", "translation", "rotation")}
-    ms = np.mean(err**2, axis=0)
-    return {"x": float(np.sqrt(ms[0])), "y": float(np.sqrt(ms[1])),
-            "theta": float(np.sqrt(ms[2])), "translation": float(np.sqrt(0.5 * (ms[0] + ms[1]))),
-            "rotation": float(np.sqrt(ms[2]))}
-
-
-def _log_views(result: FitResult, logs: Sequence[Log], shown: np.ndarray,
+def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
                ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray]:
-    """Per log: the figures and numbers; all logs' errors and velocities stacked."""
+    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs.
+
+    The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
+    the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
+    fit's pass or, when the result has none, by one streamed pass over ``logs``.
+    """
     platform = result.platform
-    model = PlatformModel(platform)
-    friction = result.options.friction
+    opts = result.options
     views, errs, vels = [], [], []
-    for k, (log, lf) in enumerate(zip(logs, result.logs, strict=True)):
-        pre = preprocess(log, platform, result.options.span, result.input_delay,
-                         result.options.row_step)
-        kept = pre.row_samples()
-        b = np.empty((len(kept), 3))
-        fit = np.empty_like(b)
-        done = 0
-        for idx, a_blk, b_blk in system(model, pre, friction):  # bounded memory
-            rows = slice(done, done + len(idx))
-            done += len(idx)
-            b[rows] = b_blk
-            fit[rows] = a_blk @ shown
-        t = pre.t[kept]
-        err = b - fit
+    fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.unit_names)
+    for k, lf in enumerate(result.logs):
+        plot = lf.plot
+        if plot is None:
+            if logs is None:
+                raise InputError(f"{lf.source}: the fit kept no plot data; give the fit's logs")
+            res = stream_log(logs[k], platform, opts.span, result.input_delay, opts.friction,
+                             row_step=opts.row_step, plot=True)
+            plot = res.plot
+            assert plot is not None
+        fit = plot.a_rows @ shown
+        err = plot.b_rows - fit
         errs.append(err)
-        vels.append(pre.qd[kept])
-        pose = pre.q
+        vels.append(plot.qd_rows)
+        rms = lf.triangles.rms(shown)
         views.append({
             "index": k,
             "id": f"log-{k + 1}",
             "source": lf.source,
             "name": _short(lf.source),
-            "samples": int(err.shape[0]),
-            "raw_samples": log.n_samples,
-            "duration": log.duration,
-            "rate": 1.0 / pre.dt if pre.dt > 0 else float("nan"),
+            "samples": lf.triangles.rows,
+            "raw_samples": plot.samples,
+            "duration": plot.duration,
+            "rate": 1.0 / plot.dt if plot.dt > 0 else float("nan"),
             "weight": lf.weight,
-            "rms": _dof_rms(err),
+            "rms": rms,
             "notes": list(lf.notes),
-            "span_samples": pre.span_samples,
-            "row_step": pre.grid.step,
-            "fig13": _png_uri(figures.fit_vs_measured(t, b, fit)),
-            "inputs": _png_uri(figures.inputs(
-                log.t, pose, pre.t, pre.qd, np.unwrap(log.delta, axis=0),
-                platform.torque_constant * log.current, platform.unit_names)),
-            "pose_source": "tracker (x_b, y_b, θ_b columns)" if log.pose is not None
+            "span_samples": plot.span_samples,
+            "row_step": plot.row_step,
+            "fig13": _png_uri(fit_figure.render(plot.t_rows, plot.b_rows, fit,
+                                                [rms["x"], rms["y"], rms["theta"]])),
+            "inputs": _png_uri(inputs_figure.render(plot)),
+            "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
@@ -314,19 +283,13 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
             o = other.get(name)
             row["other"] = o
             row["other_std"] = other_std.get(name)
-            if o is not None and math.isfinite(o):
-                diff = value - o
-                row["diff"] = diff
-                row["rel_diff"] = diff / abs(o) if o != 0 else None
-                row["z"] = diff / std if math.isfinite(std) and std > 0 else None
-            else:
-                row["diff"] = row["rel_diff"] = row["z"] = None
+            row["diff"], row["rel_diff"], row["z"] = difference(value, std, o)
         rows.append(row)
     only_other = [k for k in other if k not in sol.names]
     return rows, only_other
 
 
-def render_fit_report(result: FitResult, logs: Sequence[Log], *,
+def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *,
                       compare: str | Path | ParameterFile | None = None,
                       compare_label: str | None = None,
                       validation_logs: Sequence[Log] | None = None,
@@ -335,15 +298,19 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
                       title: str | None = None) -> str:
     """The report of ``result`` on ``logs`` (the fit's logs, in the fit's order) as HTML.
 
+    ``logs`` (in-memory logs or files) are streamed once for the figures only when the result
+    carries no plot data (:attr:`ropod_sysid.fit.LogFit.plot`: ``fit_files(..., plots=True)``
+    and :func:`result_from_parameter_file` gather it); otherwise they may be None.
+
     compare : a parameter file (path or read) shown side by side with the differences
     validation_logs : logs the fit was not fitted on: residual RMS and disturbance observer
     params_source : where the values come from when the result was rebuilt from a file
     notes : further remarks for the reader (shown in the summary)
     """
-    if len(logs) != len(result.logs):
+    if logs is not None and len(logs) != len(result.logs):
         raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
                          f"{len(logs)}")
-    compare_pf, compare_label = _compare(compare, compare_label, result.platform.unit_names)
+    compare_pf, compare_label = read_comparison(compare, compare_label, result.platform.unit_names)
     platform = result.platform
     sol = result.solution
     physical = result.physical is not None
@@ -357,11 +324,9 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
 
     validation = []
     if validation_logs:
-        params = DynamicParameters.from_vector(shown, platform.unit_names,
-                                               result.options.friction)
-        for k, v in enumerate(validate_logs(validation_logs, platform, params,
-                                            result.options.span, result.input_delay,
-                                            result.options.row_step)):
+        for k, v in enumerate(validate_logs(validation_logs, platform,
+                                            result.fitted_parameters(), result.options.span,
+                                            result.input_delay, result.options.row_step)):
             validation.append({
                 "id": f"validation-{k + 1}", "source": v.source, "name": _short(v.source),
                 "samples": v.samples,
@@ -423,8 +388,8 @@ def render_fit_report(result: FitResult, logs: Sequence[Log], *,
     return _environment().get_template("report.html").render(**context)
 
 
-def _compare(compare: str | Path | ParameterFile | None, label: str | None,
-             units: Sequence[str]) -> tuple[ParameterFile | None, str | None]:
+def read_comparison(compare: str | Path | ParameterFile | None, label: str | None,
+                    units: Sequence[str]) -> tuple[ParameterFile | None, str | None]:
     """The parameter file to show beside the fit: a fit's parameter file, or a flat
     name → value mapping such as a simulation's truth."""
     if compare is None:
@@ -444,7 +409,7 @@ def _compare(compare: str | Path | ParameterFile | None, label: str | None,
     return pfile, label or Path(compare).name
 
 
-def write_fit_report(result: FitResult, logs: Sequence[Log], path: str | Path, *,
+def write_fit_report(result: FitResult, logs: Sequence[Source] | None, path: str | Path, *,
                      compare: str | Path | ParameterFile | None = None,
                      validation_logs: Sequence[Log] | None = None,
                      **options: Any) -> None:
