@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Benchmark of long logs and fleets (issue 7): streaming fit, memory, O(N) LOESS, Dask.
 
-    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only report]
+    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only report|mcap]
+        [--mcap-minutes 3]
 
 1. Simulates a 60 s rest-to-rest ropod run at 1 kHz with ``ropod-sysid simulate`` (2¹⁴-count
    encoders, 30 mA current noise). Simulating 30 minutes at 1 kHz directly takes over an hour
@@ -19,13 +20,19 @@
      (``fit_logs`` of the whole log) on the M/3-minute log;
    - the O(N) LOESS against the brute-force definition on 10⁵ samples (ratio);
    - 8 logs (copies of the 60 s run) with ``--workers 2`` against serial (speed-up).
+   - MCAP (issue 13): ``fit`` of an M'-minute log (3 by default, ``--mcap-minutes``) as JSON
+     MCAP, ROS 2 MCAP and the robot's smart-wheel layout (ROS 2), each against ``mcap``'s own
+     reader only iterating that file's raw messages (``make_reader(f).iter_messages()``,
+     payloads untouched; goal ≤ 1.5×, JSON ≤ 2.5×), and the peak memory of each fit on M' and
+     2M' minutes (flat). The files are written once by ropod-sysid and cached.
 3. The report (issue 13), also alone with ``--only report``: ``ropod-sysid report`` on the
    shipped sample (goal ≤ 2 s); ``fit`` and ``fit --report`` on the shipped sample (the
    README's first command) and on the M/3-minute log, as the ratio
    ``fit --report`` / (1.5 × ``fit`` + 1 s) (goal ≤ 1); the peak memory of ``fit --report``
    on the M/3- and M-minute logs (goal: flat).
 4. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
-   (``--only report``: ``report.{md,json}``).
+   (``--only report``: ``report.{md,json}``; ``--only mcap``: only the MCAP part, to
+   ``results_mcap.{md,json}``).
 
 ``--quick`` (for debugging the script): a 15 s run, logs of 0.5, 1 and 2 minutes, LOESS on
 2·10⁴ samples.
@@ -219,6 +226,123 @@ def values(path: Path) -> dict[str, float]:
     return {k: v["value"] for k, v in data["parameters"].items()}
 
 
+RAW_MCAP = """
+import sys, time
+from mcap.reader import make_reader
+t0 = time.perf_counter()
+n = 0
+with open(sys.argv[1], "rb") as f:
+    for _schema, _channel, message in make_reader(f).iter_messages():
+        n += len(message.data)
+print(time.perf_counter() - t0, n)
+"""
+
+WRITE_MCAP = """
+import sys
+from ropod_sysid.io.csvlog import read_csv_log
+from ropod_sysid.io.mcaplog import write_mcap_log
+from ropod_sysid.io.smartwheel import write_smartwheel
+from ropod_sysid.platform import load_platform
+pf = load_platform(sys.argv[2])
+log = read_csv_log(sys.argv[1], pf)
+stem = sys.argv[3]
+write_mcap_log(log, stem + "_json.mcap", "json")
+write_mcap_log(log, stem + "_ros2.mcap", "ros2")
+write_smartwheel(log, stem + "_smartwheel.mcap", pf, encoding="ros2", wrap="pi", corrupt=5)
+"""
+
+MCAP_LAYOUTS = {"json": "JSON MCAP", "ros2": "ROS 2 MCAP", "smartwheel": "smart-wheel MCAP (ROS 2)"}
+
+
+def mcap_files(base: Path, base_s: float, platform_path: Path, minutes: float,
+               key: str) -> tuple[Path, dict[str, Path], int]:
+    """The CSV log of ``minutes`` (the base run tiled) and its three MCAP files (cached)."""
+    copies = max(1, round(minutes * 60 / base_s))
+    csv = OUT / f"mcap_{copies}x.csv"
+    stem = OUT / f"mcap_{copies}x"
+    paths = {k: Path(f"{stem}_{k}.mcap") for k in MCAP_LAYOUTS}
+    stamp = OUT / f"mcap_{copies}x.stamp"
+    info = tile(base, copies, csv)
+    if not (stamp.exists() and stamp.read_text() == key and all(p.exists() for p in
+                                                                  paths.values())):
+        say(f"writing {copies} × {base_s:g} s as JSON, ROS 2 and smart-wheel MCAP ...")
+        subprocess.run([sys.executable, "-c", WRITE_MCAP, str(csv), str(platform_path),
+                        str(stem)], check=True)
+        stamp.write_text(key)
+    return csv, paths, int(info["samples"])
+
+
+def raw_mcap(path: Path) -> dict[str, float]:
+    r = run_measured([sys.executable, "-c", RAW_MCAP, str(path)])
+    call, n = str(r["stdout"]).split()
+    return {"wall_s": float(r["wall_s"]), "call_s": float(call), "bytes": int(n),
+            "max_rss_mb": float(r["max_rss_mb"])}
+
+
+def mcap_bench(base: Path, base_s: float, platform_path: Path, minutes: float,
+               key: str) -> dict[str, Any]:
+    """fit of each MCAP layout against mcap's raw iteration of the same file, the fastest of
+    REPEATS alternating runs each; peak memory of the fits on ``minutes`` and twice that."""
+    out: dict[str, Any] = {"minutes": minutes}
+    csv, paths, n = mcap_files(base, base_s, platform_path, minutes, key)
+    _, paths2, n2 = mcap_files(base, base_s, platform_path, 2 * minutes, key)
+    out["samples"], out["samples_2x"] = n, n2
+    fcsv = min((fit([csv], platform_path, OUT / "mcap_params.json") for _ in range(REPEATS)),
+               key=lambda r: r["wall_s"])
+    out["csv_fit"] = fcsv
+    say(f"MCAP, {n:,} samples: fit of the CSV {fcsv['wall_s']:.2f} s")
+    for k, label in MCAP_LAYOUTS.items():
+        raws, fits = [], []
+        for _ in range(REPEATS):
+            raws.append(raw_mcap(paths[k]))
+            fits.append(fit([paths[k]], platform_path, OUT / f"mcap_params_{k}.json"))
+        raw = min(raws, key=lambda r: r["wall_s"])
+        f = min(fits, key=lambda r: r["wall_s"])
+        f["max_rss_mb"] = max(r["max_rss_mb"] for r in fits)
+        f2 = fit([paths2[k]], platform_path, OUT / f"mcap_params_{k}_2x.json")
+        v, vc = values(OUT / f"mcap_params_{k}.json"), values(OUT / "mcap_params.json")
+        agree = max(abs(v[p] - vc[p]) / abs(vc[p]) if vc[p] else abs(v[p]) for p in vc)
+        out[k] = {"raw": raw, "fit": f, "fit_2x": f2, "ratio": f["wall_s"] / raw["wall_s"],
+                  "bytes": paths[k].stat().st_size, "max_rel_diff_to_csv_fit": agree,
+                  "raw_runs_s": [r["wall_s"] for r in raws],
+                  "fit_runs_s": [r["wall_s"] for r in fits]}
+        say(f"  {label}: mcap iterates in {raw['wall_s']:.2f} s ({raw['call_s']:.2f} s in the "
+            f"loop), fit {f['wall_s']:.2f} s = {f['wall_s'] / raw['wall_s']:.2f}×; peak RSS "
+            f"{f['max_rss_mb']:.0f} MB, {2 * minutes:g} min {f2['max_rss_mb']:.0f} MB; values "
+            f"vs the CSV fit {agree:.1e}")
+    return out
+
+
+def mcap_rows(m: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+    goals = {"json": "≤ 2.5×", "ros2": "≤ 1.5×", "smartwheel": "≤ 1.5×"}
+    rows = []
+    for k, label in MCAP_LAYOUTS.items():
+        r = m[k]
+        rows.append((f"fit / mcap raw iteration, {label}, {m['minutes']:g} min",
+                     f"{r['fit']['wall_s']:.2f} s / {r['raw']['wall_s']:.2f} s",
+                     f"{r['ratio']:.2f}×", goals[k]))
+    for k, label in MCAP_LAYOUTS.items():
+        r = m[k]
+        rows.append((f"fit peak RSS, {label}, {m['minutes']:g} / {2 * m['minutes']:g} min",
+                     f"{r['fit']['max_rss_mb']:.0f} / {r['fit_2x']['max_rss_mb']:.0f} MB",
+                     f"{r['fit_2x']['wall_s']:.1f} s at {2 * m['minutes']:g} min", "flat"))
+    rows.append((f"fit of the same log as CSV, {m['minutes']:g} min",
+                 f"{m['csv_fit']['wall_s']:.2f} s", "", "(contrast)"))
+    return rows
+
+
+def write_table(rows: list[tuple[str, str, str, str]], note: str, results: dict[str, Any],
+                name: str, started: float) -> None:
+    table = table_text(rows)
+    say("\n" + table + "\n\n" + note)
+    results["table"] = rows
+    results["note"] = note
+    results["total_s"] = time.perf_counter() - started
+    (OUT / f"{name}.md").write_text(table + "\n\n" + note + "\n")
+    (OUT / f"{name}.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
+    say(f"\nwrote {OUT / (name + '.md')} ({results['total_s'] / 60:.1f} min)")
+
+
 def loess_ratio(n: int) -> dict[str, float]:
     from ropod_sysid import signals
 
@@ -409,8 +533,11 @@ def main() -> None:
                     help="length of the main log [min]; memory is also shown at 1/3 and 2x")
     ap.add_argument("--quick", action="store_true", help="small sizes, to debug the script")
     ap.add_argument("--fresh", action="store_true", help="simulate again even if cached")
-    ap.add_argument("--only", choices=["report"], default=None,
-                    help="only the report's figures (issue 13)")
+    ap.add_argument("--only", choices=("all", "report", "mcap"), default="all",
+                    help="report: only the report's figures; mcap: only the MCAP figures "
+                    "(a few minutes each)")
+    ap.add_argument("--mcap-minutes", type=float, default=3.0,
+                    help="length of the MCAP log [min]; memory is also shown at 2x")
     args = ap.parse_args()
 
     base_s = 15.0 if args.quick else 60.0
@@ -423,6 +550,15 @@ def main() -> None:
 
     platform_path, truth_path, base, cached = make_base(base_s, args.fresh)
     say(f"base run: {base.name} ({'cached' if cached else 'simulated now'})")
+    key = (OUT / f"base_{base_s:g}s.stamp").read_text()
+    mcap_minutes = 0.5 if args.quick and args.mcap_minutes == 3.0 else args.mcap_minutes
+    if args.only == "mcap":
+        results_m: dict[str, Any] = {"load_before": load()}
+        results_m["mcap"] = mcap_bench(base, base_s, platform_path, mcap_minutes, key)
+        results_m["load_after"] = load()
+        write_table(mcap_rows(results_m["mcap"]), mcap_note(base_s, results_m), results_m,
+                    "results_mcap", started)
+        return
 
     logs = {}
     for m in sizes:
@@ -442,13 +578,9 @@ def main() -> None:
         before = load()
         rep, rows = report_figures(sample_logs, platform_path, long_logs, REPEATS)
         rep["load_before"], rep["load_after"] = before, load()
-        table = table_text(rows)
         note = (f"Machine: {os.cpu_count()} cores, load average {before} before, "
                 f"{rep['load_after']} after (shared); the fastest of {REPEATS} runs counts.")
-        say("\n" + table + "\n\n" + note)
-        (OUT / "report.md").write_text(table + "\n\n" + note + "\n")
-        (OUT / "report.json").write_text(json.dumps(rep, indent=1, default=float) + "\n")
-        say(f"\nwrote {OUT / 'report.md'} ({(time.perf_counter() - started) / 60:.1f} min)")
+        write_table(rows, note, rep, "report", started)
         return
 
     truth = json.loads(truth_path.read_text())
@@ -519,7 +651,6 @@ def main() -> None:
         f"{k} {v:.2f} s" for k, v in parts.items()))
     report, report_rows = report_figures(sample_logs, platform_path, long_logs, REPEATS)
     results["report"] = report
-    results["load_after"] = load()
 
     main_fit = fits[minutes]
     rows = [
@@ -556,18 +687,22 @@ def main() -> None:
                  f"QR {100 * parts['QR triangles'] / total:.0f} %, odometry "
                  f"{100 * parts['odometry'] / total:.0f} %", "(cProfile)"))
     rows += report_rows
-    table = table_text(rows)
+    results["mcap"] = mcap_bench(base, base_s, platform_path, mcap_minutes, key)
+    rows += mcap_rows(results["mcap"])
+    results["load_after"] = load()
     note = (f"Logs: a {base_s:g} s simulated 1 kHz run repeated with t, φ continued across the "
             f"seams (δ by whole turns; no pose columns); simulating the long runs directly at "
             f"1 kHz would take hours. Machine: {os.cpu_count()} cores, load average "
             f"{results['load_before']} before, {results['load_after']} after (shared).")
-    say("\n" + table + "\n\n" + note)
-    results["table"] = rows
-    results["note"] = note
-    results["total_s"] = time.perf_counter() - started
-    (OUT / "results.md").write_text(table + "\n\n" + note + "\n")
-    (OUT / "results.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
-    say(f"\nwrote {OUT / 'results.md'} ({results['total_s'] / 60:.1f} min)")
+    write_table(rows, note, results, "results", started)
+
+
+def mcap_note(base_s: float, results: dict[str, Any]) -> str:
+    return (f"MCAP logs: the {base_s:g} s simulated 1 kHz run repeated, written by ropod-sysid "
+            "(64 KiB zstd chunks with CRCs; the smart-wheel file with 5 corrupt frames of each "
+            "kind, encoders wrapped); wall times of whole processes, the fastest of "
+            f"{REPEATS} alternating runs. Machine: {os.cpu_count()} cores, load average "
+            f"{results['load_before']} before, {results['load_after']} after (shared).")
 
 
 if __name__ == "__main__":

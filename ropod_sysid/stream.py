@@ -1,8 +1,8 @@
 """Chunked identification: a log of any length in bounded memory, equal to the in-memory path.
 
 A log is read in chunks (:func:`ropod_sysid.io.csvlog.iter_csv_log` for CSV, also ``.csv.gz``;
-:func:`ropod_sysid.io.mcaplog.iter_mcap_log` for MCAP; the robot's smart-wheel layout, whose
-frames are checked over the whole log, is read whole and then processed in chunks) and goes
+:func:`ropod_sysid.io.mcaplog.iter_mcap_log` for MCAP, the robot's smart-wheel layout
+included; a smart-wheel CSV is read whole and then processed in chunks) and goes
 through the steps of :func:`ropod_sysid.regressor.preprocess` and
 :func:`ropod_sysid.regressor.triangles` block by block:
 

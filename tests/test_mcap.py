@@ -423,3 +423,169 @@ def test_chunked_read_of_a_too_short_log_has_the_whole_read_error(tmp_path, off_
         list(iter_mcap_log(path, off_square, 100))
     assert str(chunked.value) == str(whole.value)
     assert "only 2 messages; at least 3 samples are needed" in str(whole.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# batch decoding: the fixed CDR layout, messages off it, JSON parsed by orjson
+
+
+def write_ros2_messages(path, messages):
+    """A contract ROS 2 file of the given message dicts (any units, arrays and poses)."""
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    from ropod_sysid.io.mcaplog import CONTRACT_MSGDEF, CONTRACT_ROS2_SCHEMA, new_writer
+
+    encode = serialize_dynamic(CONTRACT_ROS2_SCHEMA, CONTRACT_MSGDEF)[CONTRACT_ROS2_SCHEMA]
+    with open(path, "wb") as f:
+        w = new_writer(f, profile="ros2")
+        sid = w.register_schema(CONTRACT_ROS2_SCHEMA, "ros2msg", CONTRACT_MSGDEF.encode())
+        cid = w.register_channel(CONTRACT_TOPIC, "cdr", sid)
+        for k, m in enumerate(messages):
+            w.add_message(cid, k, encode(m), k, k)
+        w.finish()
+
+
+def contract_messages(log, units=None):
+    units = units or list(log.units)
+    idx = [list(log.units).index(u) for u in units]
+    out = []
+    for k in range(log.n_samples):
+        out.append({"t": float(log.t[k]), "units": units,
+                    "delta": log.delta[k, idx].tolist(), "phi_l": log.phi[k, idx, 0].tolist(),
+                    "phi_r": log.phi[k, idx, 1].tolist(), "cur_l": log.current[k, idx, 0].tolist(),
+                    "cur_r": log.current[k, idx, 1].tolist(), "pose": []})
+    return out
+
+
+def test_fixed_cdr_layout_reads_the_numbers_of_every_message(mcap_files, off_square):
+    """The layout of the first message finds the same numbers as the per-message decoder in
+    every message; a message of another length or with other counts is left out."""
+    from ropod_sysid.io.cdr import contract_layout
+    from ropod_sysid.io.mcapdecode import ros2_decoder
+
+    scan = scan_mcap(mcap_files["ros2"])
+    (channel,) = scan.channels.values()
+    decode = ros2_decoder(scan.schemas[channel.schema_id], channel.topic, "x")
+    payloads = [m.data for m in scan.messages[channel.id]]
+    layout = contract_layout(payloads[0], decode(payloads[0]))
+    assert layout is not None and layout.size == len(payloads[0])
+    odd = bytearray(payloads[5])
+    odd[16] ^= 1                          # the length of the first unit name
+    batch = payloads[:5] + [bytes(odd), payloads[6][:-8]] + payloads[7:]
+    mask, cols = layout.read(batch)
+    assert mask.tolist() == [True] * 5 + [False, False] + [True] * (len(batch) - 7)
+    msgs = [decode(p) for p in payloads]
+    keep = [m for m, ok in zip(msgs, mask, strict=True) if ok]
+    assert np.array_equal(cols["t"], [m.t for m in keep])
+    assert np.array_equal(cols["values"][:, 1], [m.phi_l for m in keep])
+    assert cols["pose"].shape == (len(keep), 0)
+
+
+@pytest.mark.parametrize("chunk", [None, 97])
+def test_ros2_messages_off_the_fixed_layout_are_decoded_one_by_one(tmp_path, off_square,
+                                                                   runs_off_square, chunk):
+    from ropod_sysid.io.mcaplog import iter_mcap_log
+
+    log = runs_off_square[1].log.slice(0, 400)
+    msgs = contract_messages(log)
+    msgs[150]["pose"] = [1.0, 2.0, 3.0]     # longer than the others; ignored, as message 0
+    path = tmp_path / "odd.mcap"           # has no pose
+    write_ros2_messages(path, msgs)
+
+    def read(p):
+        if chunk is None:
+            return read_quiet(p, off_square)
+        ok, back, texts, _ = read_chunked(p, off_square, chunk)
+        assert ok == "ok" and texts == []
+        return back
+
+    assert_same_log(read(path), log)
+    msgs[160] = contract_messages(log.slice(160, 161), ["2", "1", "3", "4"])[0]
+    write_ros2_messages(path, msgs)
+    with pytest.raises(InputError) as err:
+        list(iter_mcap_log(path, off_square, chunk)) if chunk else read_mcap_log(path, off_square)
+    assert (f"message 160 lists units ['2', '1', '3', '4'] but message {chunk or 0} lists "
+            "['1', '2', '3', '4']") in str(err.value)
+    msgs[160] = dict(contract_messages(log.slice(160, 161))[0], cur_r=[0.5, 0.5])
+    write_ros2_messages(path, msgs)
+    with pytest.raises(InputError, match="message 160 has arrays shorter than its unit list"):
+        list(iter_mcap_log(path, off_square, chunk)) if chunk else read_mcap_log(path, off_square)
+
+
+def test_json_messages_orjson_refuses_are_read_by_json(tmp_path, off_square, runs_off_square):
+    """Integers for floats, extra keys and a message only Python's parser takes (a big
+    integer) read as before; text that is no JSON is damage named as json.loads names it."""
+    log = runs_off_square[2].log.slice(0, 60)
+    path = tmp_path / "j.mcap"
+    write_mcap_log(log, path, "json")
+    scan = scan_mcap(path)
+    (channel,) = scan.channels.values()
+    payloads = [m.data for m in scan.messages[channel.id]]
+    msgs = [json.loads(p) for p in payloads]
+    msgs[3]["extra"] = {"note": "ignored"}
+    msgs[4]["units"]["1"]["cur_L"] = 2
+    msgs[5]["units"]["2"]["cur_R"] = 10**30           # beyond orjson's integers
+    expected = dataclasses.replace(log, current=log.current.copy())
+    expected.current[4, 0, 0], expected.current[5, 1, 1] = 2.0, 1e30
+
+    def write(texts):
+        with open(path, "wb") as f:
+            w = McapWriter(f)
+            w.start()
+            sid = w.register_schema(scan.schemas[channel.schema_id].name, "jsonschema", b"{}")
+            cid = w.register_channel(CONTRACT_TOPIC, "json", sid)
+            for k, text in enumerate(texts):
+                w.add_message(cid, k, text, k)
+            w.finish()
+
+    write([json.dumps(m).encode() for m in msgs])
+    assert_same_log(read_quiet(path, off_square), expected)
+    texts = [json.dumps(m).encode() for m in msgs]
+    texts[6] = texts[6].replace(b'"t": ', b'"t":\n ', 1)        # JSON over two lines
+    texts[7] = re.sub(rb'"phi_L": [^,]+', b'"phi_L": -0', texts[7], count=1)  # Python: 0.0
+    expected.phi[7, 0, 0] = 0.0
+    write(texts)
+    back = read_quiet(path, off_square)
+    assert_same_log(back, expected)
+    assert not np.signbit(back.phi[7, 0, 0])
+    del msgs[9]["units"]["3"]["delta"]
+    write([json.dumps(m).encode() for m in msgs])
+    with pytest.raises(InputError, match=r"message 9 lacks a log field \(no 'delta'\)"):
+        read_mcap_log(path, off_square)
+    msgs[9]["units"]["3"]["delta"] = 0.5
+    write([json.dumps(m).encode() for m in msgs[:40]] + [b'{"t": 1.0, "units": {'] +
+          [json.dumps(m).encode() for m in msgs[41:]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        back = read_mcap_log(path, off_square)
+    assert back.n_samples == 40
+    assert ("message 40 on /ropod/sysid cannot be decoded (JSONDecodeError: Expecting "
+            "property name enclosed in double quotes") in str(caught[0].message)
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_log_channel_interleaved_with_another_reads_the_same(tmp_path, mcap_files, off_square,
+                                                              encoding):
+    """Chunks that mix our channel with another topic's messages (as a robot's recording
+    does) give the same log, whole and in chunks."""
+    from ropod_sysid.io.mcaplog import new_writer
+
+    scan = scan_mcap(mcap_files[encoding])
+    (channel,) = scan.channels.values()
+    schema = scan.schemas[channel.schema_id]
+    path = tmp_path / "mixed.mcap"
+    with open(path, "wb") as f:
+        w = new_writer(f)
+        sid = w.register_schema(schema.name, schema.encoding, schema.data)
+        cid = w.register_channel(channel.topic, channel.message_encoding, sid)
+        other = w.register_channel("/tf", "json", w.register_schema("x/Y", "jsonschema", b"{}"))
+        for k, m in enumerate(scan.messages[channel.id]):
+            w.add_message(cid, m.log_time, m.data, m.publish_time, k)
+            if k % 3 == 0:
+                w.add_message(other, m.log_time, b'{"x": %d}' % k, m.log_time, k)
+        w.finish()
+    whole = read_quiet(mcap_files[encoding], off_square)
+    assert_same_log(read_quiet(path, off_square), whole)
+    ok, log, texts, _ = read_chunked(path, off_square, 500)
+    assert ok == "ok" and texts == []
+    assert_same_log(log, whole)

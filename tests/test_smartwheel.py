@@ -17,6 +17,7 @@ import pytest
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_logs
 from ropod_sysid.io import read_log
+from ropod_sysid.io.log import Log
 from ropod_sysid.io.mcaplog import scan_mcap
 from ropod_sysid.io.smartwheel import (
     REQUIRED_FLOATS,
@@ -334,3 +335,66 @@ def test_extra_sensors_are_ignored_with_a_note(tmp_path, clean, off_square):
         back = read_log(path, pf3)
     short = dataclasses.replace(log.slice(0, 30))
     assert np.array_equal(back.current, short.current[:, :3])
+
+
+@pytest.mark.parametrize("encoding", ["json", "ros2"])
+def test_smartwheel_mcap_streams_in_chunks(tmp_path, clean, off_square, encoding):
+    """Chunk by chunk (the checks carried across chunks) the samples are the whole read's bit
+    for bit, the note comes once with the last chunk, and the streamed fit is the whole one."""
+    from ropod_sysid.fit import fit_files
+    from ropod_sysid.io.mcaplog import iter_mcap_log, read_mcap_log
+
+    log, _ = clean
+    pf = sw_platform(off_square)
+    path = tmp_path / "sw.mcap"
+    write_smartwheel(log, path, pf, encoding=encoding, wrap="pi", corrupt=4, seed=9)
+    with pytest.warns(UserWarning):
+        whole = read_mcap_log(path, pf)
+    for chunk in (1, 2, 97, 1000):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            parts = list(iter_mcap_log(path, pf, chunk))
+        assert [str(w.message) for w in caught] == whole.notes
+        assert [p.n_samples for p in parts[:-1]] == [chunk] * (len(parts) - 1)
+        assert 1 <= parts[-1].n_samples <= chunk
+        assert all(p.notes == [] for p in parts[:-1]) and parts[-1].notes == whole.notes
+        for name in ("t", "delta", "phi", "current"):
+            joined = np.concatenate([getattr(p, name) for p in parts])
+            assert np.array_equal(joined, getattr(whole, name)), (chunk, name)
+    with pytest.warns(UserWarning, match="dropped 12 of 1613"):
+        streamed = fit_files([path], pf, FitOptions(), chunk=500)
+    assert_same_fit(fit_logs([whole], pf, FitOptions()), streamed, rtol=1e-12)
+
+
+@pytest.mark.parametrize("encoding", ["json", "ros2"])
+def test_a_gap_after_dropped_frames_names_the_same_frame_whole_and_in_chunks(
+        tmp_path, runs_off_square, off_square, encoding):
+    """The time checks (ropod_sysid.io.timebase) of a smart-wheel MCAP name the frame of the
+    file, past the dropped ones, whether the log is read whole or chunk by chunk; with
+    gaps="allow" the log reads, and its chunks are the whole read's."""
+    from ropod_sysid.io.mcaplog import iter_mcap_log, read_mcap_log
+
+    a, b = runs_off_square[0].log, runs_off_square[1].log
+    gapped = Log(np.concatenate([a.t, b.t - b.t[0] + a.t[-1] + 10.0]), list(a.units),
+                 np.concatenate([a.delta, b.delta]), np.concatenate([a.phi, b.phi]),
+                 np.concatenate([a.current, b.current]))
+    path = tmp_path / "gapped.mcap"
+    write_smartwheel(gapped, path, off_square, encoding=encoding, corrupt=4, seed=5)
+    f, _ = raw_frames(gapped, off_square, corrupt=4, seed=5)
+    ts0 = f["sensor_ts"][:, 0].astype(np.int64)
+    after = int(np.flatnonzero(ts0 - ts0[0] > int(round((a.t[-1] - a.t[0] + 5.0) * 1e9)))[0])
+    assert after > a.n_samples                  # dropped frames lie before the gap
+    pattern = rf"{re.escape(str(path))}: frame #{after}: a gap of 10 s .* on frame #\d+; "
+    with pytest.raises(InputError, match=pattern) as whole:
+        read_mcap_log(path, off_square)
+    for chunk in (1, 97, a.n_samples, 1000):
+        with pytest.raises(InputError) as chunked:
+            list(iter_mcap_log(path, off_square, chunk))
+        assert str(chunked.value) == str(whole.value)
+    with pytest.warns(UserWarning, match="dropped 12 of"):
+        allowed = read_mcap_log(path, off_square, gaps="allow")
+    assert allowed.n_samples == gapped.n_samples
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        parts = list(iter_mcap_log(path, off_square, 97, gaps="allow"))
+    assert np.array_equal(np.concatenate([p.t for p in parts]), allowed.t)

@@ -71,3 +71,18 @@ class Log:
         return Log(self.t[start:stop], list(self.units), self.delta[start:stop],
                    self.phi[start:stop], self.current[start:stop], pose, self.source,
                    list(self.notes), self.piece)
+
+
+def join_logs(parts: list[Log], notes: list[str] | None = None) -> Log:
+    """Consecutive pieces of one log as one log (the notes given, else the pieces')."""
+    if len(parts) == 1 and notes is None:
+        return parts[0]
+    first = parts[0]
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    pose = None if first.pose is None else cat("pose")
+    return Log(cat("t"), list(first.units), cat("delta"), cat("phi"), cat("current"), pose,
+               first.source, [n for p in parts for n in p.notes] if notes is None else notes,
+               first.piece)

@@ -15,8 +15,11 @@ Floats are written exactly (JSON numbers in Python's shortest round-trip form, C
 CSV → MCAP → CSV gives the identical file. Chunks are small (64 KiB before compression) so that
 a damaged or truncated file loses little.
 
-Reading (:func:`read_mcap_log`) iterates the records in file order without seeking, so files
-without index or summary (a recording that was cut off) read too. It recognises our layout (JSON or
+Reading (:func:`read_mcap_log`, :func:`iter_mcap_log` in chunks) iterates the records in file
+order without seeking, so files without index or summary (a recording that was cut off) read
+too. A chunk of only messages is split into payloads without a record object per message
+(:class:`MessageRun`), and the payloads are decoded a batch at a time
+(:mod:`ropod_sysid.io.mcapdecode`). It recognises our layout (JSON or
 ROS 2) and the smart-wheel layout (:mod:`ropod_sysid.io.smartwheel`) by schema and topic names.
 Damage — truncation, a CRC mismatch, a broken compressed chunk, an unreadable record or message —
 stops reading there: what came before is kept with a warning (``warnings.warn`` and
@@ -26,29 +29,36 @@ refused with a one-line :class:`InputError`.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import struct
+import sys
 import warnings
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from itertools import compress
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError, RecordLengthLimitExceeded
-from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, DataEnd, Footer, Message, MessageIndex, Schema
+from mcap.stream_reader import (
+    CRCValidationError,
+    StreamReader,
+    breakup_chunk,
+    get_chunk_data_stream,
+)
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
-from ropod_sysid.io.log import Log
-from ropod_sysid.io.timebase import Gaps, TimeBase, check_times, checked_chunks, message_numbers
+from ropod_sysid.io.log import Log, join_logs
+from ropod_sysid.io.mcapdecode import ContractPieces, Rows
+from ropod_sysid.io.timebase import Gaps, TimeBase, checked_chunks
 from ropod_sysid.platform import Platform
 
 try:  # the compressors mcap uses; their errors mean a broken chunk
@@ -64,7 +74,6 @@ ENCODINGS = ("json", "ros2")
 CHUNK_SIZE = 64 * 1024
 MIN_SAMPLES = 3
 UNIT_FIELDS = ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
-_FLOAT_MAX = int(np.finfo(np.float64).max)   # a larger JSON integer overflows a float
 POSE_FIELDS = ("x_b", "y_b", "theta_b")
 _MAX_CHUNK = 1 << 30   # a larger uncompressed chunk size is taken for damage
 _LIBRARY = "ropod-sysid"
@@ -241,6 +250,23 @@ class _Bounded:
         return data
 
 
+class _Reader(StreamReader):
+    """The ``mcap`` stream reader, but a message index (16 bytes per message, which we never
+    use) is passed over in one read instead of parsed entry by entry: the same bytes are
+    consumed (and CRC-checked), and a file that ends inside it ends there as well."""
+
+    def _read_record(self, opcode: int, length: int) -> Any:
+        if opcode != Opcode.MESSAGE_INDEX:
+            return super()._read_record(opcode, length)
+        stream = self._stream
+        channel_id = stream.read2()
+        size = stream.read4()
+        size += -size % 16                    # whole (timestamp, offset) entries, as read
+        if size and len(stream.read(size)) < size:
+            raise EndOfFile()
+        return MessageIndex(channel_id, [])
+
+
 def _open_binary(path: Path, where: str) -> IO[bytes]:
     try:
         return open(path, "rb")  # noqa: SIM115
@@ -261,15 +287,39 @@ def scan_mcap(path: str | Path, keep_messages: bool = True) -> McapScan:
     magic, unreadable first record); damage further on is reported in :attr:`McapScan.damage`.
     """
     scan = McapScan()
-    for record in _records(path, scan):
+    for record in _records(path, scan, light=not keep_messages):
         _take(scan, record, keep_messages)
     return scan
 
 
-def _records(path: str | Path, scan: McapScan) -> Iterator[Any]:
+class MessageRun:
+    """The messages of a chunk, parsed only as far as their channels and payloads (the
+    payloads of a chunk of equal records are cut when asked for)."""
+
+    __slots__ = ("_cut", "_data", "channels")
+
+    def __init__(self, channels: list[int], data: list[bytes] | None = None,
+                 cut: Any = None) -> None:
+        self.channels, self._data, self._cut = channels, data, cut
+
+    @property
+    def data(self) -> list[bytes]:
+        if self._data is None:
+            self._data = self._cut()
+        return self._data
+
+    def of(self, channel_id: int) -> list[bytes]:
+        """The payloads on one channel."""
+        if self.channels.count(channel_id) == len(self.channels):
+            return self.data
+        return list(compress(self.data, [c == channel_id for c in self.channels]))
+
+
+def _records(path: str | Path, scan: McapScan, light: bool = False) -> Iterator[Any]:
     """The records of an MCAP file in file order (chunks broken up), up to the first damage,
     which is noted in ``scan`` (with :attr:`McapScan.complete` and the size) as
-    :func:`scan_mcap` describes."""
+    :func:`scan_mcap` describes. ``light``: a chunk of only messages comes as one
+    :class:`MessageRun` instead of :class:`Message` records."""
     where = str(path)
     path = Path(path)
     with _open_binary(path, where) as f:
@@ -280,8 +330,8 @@ def _records(path: str | Path, scan: McapScan) -> Iterator[Any]:
         if scan.size == 0:
             raise InputError(f"{where}: the file is empty; an MCAP log was expected")
         src = _Bounded(f, scan.size)
-        reader = StreamReader(src, emit_chunks=True, validate_crcs=True,  # type: ignore[arg-type]
-                              record_size_limit=scan.size)
+        reader = _Reader(src, emit_chunks=True, validate_crcs=True,  # type: ignore[arg-type]
+                         record_size_limit=scan.size)
         records = reader.records
         good_end = 0        # end of the last record read intact
         first = True
@@ -289,7 +339,8 @@ def _records(path: str | Path, scan: McapScan) -> Iterator[Any]:
         while True:
             try:
                 record = next(records)   # after the footer: checks the closing magic bytes
-                inner = _chunk_records(record) if isinstance(record, Chunk) else [record]
+                inner = ((_light_records if light else _chunk_records)(record)
+                         if isinstance(record, Chunk) else [record])
             except StopIteration:
                 if footer is None and scan.damage is None:
                     scan.damage = (f"the file ends after byte {good_end} without a footer — "
@@ -346,6 +397,57 @@ def _chunk_records(chunk: Chunk) -> list[Any]:
     return breakup_chunk(chunk, validate_crc=True)
 
 
+_MESSAGE_HEAD = struct.Struct("<BQH")      # opcode, record length, channel id
+
+
+def _light_records(chunk: Chunk) -> list[Any]:
+    """:func:`_chunk_records` for a chunk of only well-formed messages, as a
+    :class:`MessageRun`; any other chunk is broken up by the ``mcap`` library."""
+    if chunk.uncompressed_size > _MAX_CHUNK:
+        raise ValueError(f"implausible chunk size {chunk.uncompressed_size}")
+    stream, size = get_chunk_data_stream(chunk, validate_crc=True)
+    data = stream.read(size)
+    run = _uniform_run(data, size)
+    if run is not None:
+        return [run]
+    channels: list[int] = []
+    ends: list[int] = []
+    head = _MESSAGE_HEAD.unpack_from
+    pos = 0
+    try:
+        while pos < size:
+            op, length, cid = head(data, pos)
+            end = pos + 9 + length
+            if op != Opcode.MESSAGE or length < 22 or end > size:
+                return breakup_chunk(chunk, validate_crc=True)
+            channels.append(cid)
+            ends.append(end)
+            pos = end
+    except struct.error:
+        return breakup_chunk(chunk, validate_crc=True)
+    if not ends:
+        return []
+    return [MessageRun(channels, cut=lambda: [data[s + 31:e] for s, e in
+                                              zip([0, *ends[:-1]], ends, strict=True)])]
+
+
+def _uniform_run(data: bytes, size: int) -> MessageRun | None:
+    """The messages of a chunk whose records are all messages of one length (a fixed-layout
+    channel), found with numpy; None for any other chunk."""
+    if size < 31:
+        return None
+    op, length, _ = _MESSAGE_HEAD.unpack_from(data, 0)
+    step = 9 + length
+    if op != Opcode.MESSAGE or length < 22 or size % step:
+        return None
+    rows = np.frombuffer(data, dtype=np.uint8).reshape(-1, step)
+    if not ((rows[:, 0] == op).all() and (rows[:, 1:9] == rows[0, 1:9]).all()):
+        return None
+    channels = rows[:, 9:11].copy().view("<u2").ravel().tolist()
+    return MessageRun(channels, cut=lambda: [data[p:p + length - 22]
+                                             for p in range(31, size, step)])
+
+
 def _take(scan: McapScan, record: Any, keep_messages: bool = True) -> None:
     # the first copy counts: the summary repeats schemas and channels, and is read last
     if isinstance(record, Schema):
@@ -357,6 +459,9 @@ def _take(scan: McapScan, record: Any, keep_messages: bool = True) -> None:
         scan.counts[cid] = scan.counts.get(cid, 0) + 1
         if keep_messages:
             scan.messages.setdefault(cid, []).append(record)
+    elif isinstance(record, MessageRun):
+        for cid in set(record.channels):
+            scan.counts[cid] = scan.counts.get(cid, 0) + record.channels.count(cid)
 
 
 def _what(exc: BaseException, good_end: int, at_eof: bool, boundary: bool) -> str:
@@ -448,99 +553,103 @@ def read_mcap_log(path: str | Path, platform: Platform, gaps: Gaps = "error") ->
     is no MCAP at all, :class:`InputError` (one line) is raised; so is a bad time base
     (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
     """
-    where = str(path)
-    scan = scan_mcap(path)
-    stream = pick_stream(scan, where)
-    decode = _decoder(stream, where)
-    decoded: list[Any] = []
-    damage = scan.damage
-    for k, msg in enumerate(stream.messages):
-        try:
-            decoded.append(decode(msg.data))
-        except READ_ERRORS as exc:
-            damage = _undecodable(k, stream, exc)
-            break
-    n = len(decoded)
-    _check_recovered(n, damage, stream, where)
-    if stream.layout == "smartwheel":
-        from ropod_sysid.io.smartwheel import frames_from_messages, frames_to_log
+    return join_logs(list(iter_mcap_log(path, platform, chunk=sys.maxsize, gaps=gaps)))
 
-        frames = frames_from_messages(decoded, platform, where, stream.encoding)
-        log = frames_to_log(frames, platform, where, warn=False, gaps=gaps)
-    else:
-        log = _contract_log(decoded, stream.encoding, platform, where, damage is not None)
-        check_times(log.t, where, message_numbers(), gaps)
-    if damage:
-        log.notes.insert(0, _damage_note(n, len(stream.messages), damage, scan, where))
-    for note in log.notes:
-        warnings.warn(note, stacklevel=2)
-    return log
+
+BATCH = 8192     # payloads decoded at once
 
 
 def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000,
                   gaps: Gaps = "error") -> Iterator[Log]:
-    """:func:`read_mcap_log` as consecutive logs of ``chunk`` messages, in memory bounded by
-    the chunk: a first pass over the records finds the channels, counts the messages and
-    notes any damage (nothing is kept), a second decodes the chosen channel's messages as
-    they come. The same checks and messages as the whole read, numbered in the whole file;
-    the damage note (and its warning) comes with the last chunk. The smart-wheel layout,
-    whose frames are checked over the whole log, is read whole and then cut.
+    """:func:`read_mcap_log` as consecutive logs of at most ``chunk`` samples, in memory
+    bounded by the chunk: a first pass over the records finds the channels, counts the
+    messages and notes any damage (nothing is kept), a second decodes the chosen channel's
+    messages a batch at a time (:mod:`ropod_sysid.io.mcapdecode`). The same checks and
+    messages as one piece, numbered in the whole file; the time base is checked as the chunks
+    come (:func:`ropod_sysid.io.timebase.checked_chunks`); the notes (damage, dropped
+    smart-wheel frames) and their warnings come with the last chunk, after its checks.
     """
     if chunk < 1:
         raise ValueError(f"chunk must be positive, got {chunk}")
     where = str(path)
     scan = scan_mcap(path, keep_messages=False)
     stream = pick_stream(scan, where)
-    if stream.layout != "contract":
-        log = read_mcap_log(path, platform, gaps)
-        return (log.slice(start, start + chunk) for start in range(0, log.n_samples, chunk))
-    tb = TimeBase(where, message_numbers(), gaps)
-    return checked_chunks(_contract_chunks(path, platform, chunk, scan, stream), tb)
+    if stream.layout == "contract":
+        pieces: Any = ContractPieces(stream, platform, where)
+    else:
+        from ropod_sysid.io.swframes import SmartWheelPieces
+
+        pieces = SmartWheelPieces(stream, platform, where, chunk)
+    tb = TimeBase(where, pieces.locate, gaps)
+    return _warned(checked_chunks(_chunks(path, chunk, scan, stream, pieces), tb))
 
 
-def _contract_chunks(path: str | Path, platform: Platform, chunk: int, scan: McapScan,
-                     stream: Stream) -> Iterator[Log]:
-    """The chunks of :func:`iter_mcap_log` of the contract layout, before the time checks."""
+def _warned(logs: Iterator[Log]) -> Iterator[Log]:
+    """The chunks, each one's notes warned as it is handed on (time checked by then)."""
+    for log in logs:
+        for note in log.notes:
+            warnings.warn(note, stacklevel=2)
+        yield log
+
+
+def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces: Any
+            ) -> Iterator[Log]:
+    """The chunks of :func:`iter_mcap_log`, before the time checks."""
     where = str(path)
-    decode = _decoder(stream, where)
     cid = stream.channel.id
     damage = scan.damage
-    buf: list[Any] = []
-    done = 0  # messages yielded
+    pending: list[Rows] = []
+    n_pending = 0
+    decoded = 0      # messages decoded
+    done = 0         # messages handed on
+    raw: list[bytes] = []
 
-    def emit(msgs: list[Any], final: bool) -> Log:
-        nonlocal done
-        log = _contract_log(msgs, stream.encoding, platform, where, damage is not None,
-                            offset=done, whole=final and done == 0)
-        done += len(msgs)
-        if final and damage:
-            log.notes.insert(0, _damage_note(done, scan.counts.get(cid, 0), damage, scan,
-                                             where))
-        return log
+    def decode() -> bool:
+        """Decode ``raw`` into ``pending``; False at a message that cannot be decoded."""
+        nonlocal damage, decoded, n_pending
+        rows, bad, exc = pieces.decoder(raw[:])
+        if len(rows):
+            pending.append(rows)
+            n_pending += len(rows)
+        decoded += len(rows)
+        raw.clear()
+        if bad is not None:
+            damage = _undecodable(decoded, stream, exc)   # type: ignore[arg-type]
+            return False
+        return True
 
-    records = _records(path, McapScan())
+    def ready() -> Iterator[Log]:
+        nonlocal done, n_pending, pending
+        while n_pending > chunk:          # one held back: the last chunk is never empty
+            rows = Rows.join(pending)
+            pending, n_pending = [rows.take(chunk)], n_pending - chunk
+            yield from pieces.logs(rows.take(0, chunk), done, False)
+            done += chunk
+
+    records = _records(path, McapScan(), light=True)
     try:
-        k = 0
         for record in records:
-            if not (isinstance(record, Message) and record.channel_id == cid):
-                continue
-            try:
-                buf.append(decode(record.data))
-            except READ_ERRORS as exc:
-                damage = _undecodable(k, stream, exc)
-                break
-            k += 1
-            if len(buf) > chunk:  # one held back: the last chunk is never empty
-                yield emit(buf[:chunk], False)
-                del buf[:chunk]
+            if isinstance(record, MessageRun):
+                raw.extend(record.of(cid))
+            elif isinstance(record, Message) and record.channel_id == cid:
+                raw.append(record.data)
+            if len(raw) >= BATCH:
+                if not decode():
+                    break
+                yield from ready()
+        else:
+            decode()
     finally:
         records.close()
-    if done == 0:
-        _check_recovered(len(buf), damage, stream, where)
-    last = emit(buf, True)
-    for note in last.notes:
-        warnings.warn(note, stacklevel=2)
-    yield last
+    yield from ready()
+    _check_recovered(decoded, damage, stream, where)
+    rows = Rows.join(pending) if pending else None
+    out = list(pieces.logs(rows, done, True))
+    last = out[-1]
+    if damage:
+        last.notes.insert(0, _damage_note(decoded, scan.counts.get(cid, 0), damage, scan,
+                                          where))
+    yield from out
 
 
 def _undecodable(k: int, stream: Stream, exc: BaseException) -> str:
@@ -569,143 +678,6 @@ def _damage_note(n: int, total: int, damage: str, scan: McapScan, where: str) ->
     of = f" of {total}" if total > n else ""
     return (f"{where}: damaged MCAP file ({damage}); recovered the {n}{of} message"
             f"{'s' if n != 1 else ''} before the damage — the log may end early")
-
-
-def _decoder(stream: Stream, where: str) -> Any:
-    if stream.encoding == "json":
-        return json.loads
-    schema = stream.schema
-    if schema is None or schema.encoding != "ros2msg":
-        raise InputError(f"{where}: channel {stream.channel.topic} is CDR-encoded but has no "
-                         "ros2msg schema; it cannot be decoded")
-    from mcap_ros2._dynamic import generate_dynamic
-
-    try:
-        with contextlib.redirect_stderr(io.StringIO()):     # the parser prints its complaints
-            types = generate_dynamic(schema.name, schema.data.decode())
-        return types[schema.name]
-    except Exception as exc:   # noqa: BLE001 - the vendored rosidl parser has its own errors
-        raise InputError(f"{where}: the ros2msg schema {schema.name!r} of "
-                         f"{stream.channel.topic} cannot be parsed ({type(exc).__name__})") \
-            from None
-
-
-def _contract_log(decoded: list[Any], encoding: str, platform: Platform, where: str,
-                  damaged: bool, offset: int = 0, whole: bool = True) -> Log:
-    """The log of decoded contract messages; ``offset``: the number of the first message in
-    the file (for the messages' numbers in errors); ``whole``: the messages are the whole log
-    (else a chunk of it: too few of them is no error)."""
-    units = platform.unit_names
-    n_units = len(units)
-    n = len(decoded)
-    t = np.empty(n)
-    vals = np.empty((n, n_units, 5))
-    pose: np.ndarray | None = None
-    if encoding == "json":
-        first = decoded[0]
-        if not isinstance(first, dict) or not isinstance(first.get("units"), dict):
-            raise InputError(f"{where}: message {offset} is not a ropod-sysid log sample "
-                             "(expected keys 't' and 'units'); the file may use another layout")
-        _check_units(list(first["units"]), platform, where)
-        has_pose = isinstance(first.get("pose"), dict)
-        if has_pose:
-            pose = np.empty((n, 3))
-        for k, m in enumerate(decoded):
-            try:
-                t[k] = m["t"]
-                mu = m["units"]
-                for i, u in enumerate(units):
-                    e = mu[u]
-                    vals[k, i] = (e["delta"], e["phi_L"], e["phi_R"], e["cur_L"], e["cur_R"])
-                if pose is not None:
-                    p = m["pose"]
-                    pose[k] = (p["x_b"], p["y_b"], p["theta_b"])
-            except KeyError as exc:
-                raise InputError(f"{where}: message {offset + k} lacks a log field "
-                                 f"({_field(exc)}); every message needs t and delta, phi_L, "
-                                 "phi_R, cur_L, cur_R of every unit") from None
-            except (TypeError, ValueError, OverflowError) as exc:
-                raise InputError(f"{where}: message {offset + k} "
-                                 f"{_json_value_problem(m, units, pose is not None, exc)}") \
-                    from None
-    else:
-        first_units = list(decoded[0].units)
-        _check_units(first_units, platform, where)
-        idx = [first_units.index(u) for u in units]
-        has_pose = len(decoded[0].pose) == 3
-        if has_pose:
-            pose = np.empty((n, 3))
-        for k, m in enumerate(decoded):
-            if list(m.units) != first_units:
-                raise InputError(f"{where}: message {offset + k} lists units {list(m.units)} "
-                                 f"but message {offset} lists {first_units}; the unit order "
-                                 "must not change within a log")
-            t[k] = m.t
-            try:
-                for j, arr in enumerate((m.delta, m.phi_l, m.phi_r, m.cur_l, m.cur_r)):
-                    vals[k, :, j] = [arr[i] for i in idx]
-                if pose is not None:
-                    pose[k] = m.pose
-            except (IndexError, ValueError) as exc:
-                raise InputError(f"{where}: message {offset + k} has arrays shorter than its "
-                                 f"unit list ({type(exc).__name__}); the message is malformed") \
-                    from None
-    bad = ~np.isfinite(vals).all(axis=(1, 2)) | ~np.isfinite(t)
-    if pose is not None:
-        bad |= ~np.isfinite(pose).all(axis=1)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        named = [("t", t[k])] + [(f"units.{u}.{f}", vals[k, i, j]) for i, u in enumerate(units)
-                                 for j, f in enumerate(UNIT_FIELDS)]
-        if pose is not None:
-            named += [(f"pose.{f}", pose[k, j]) for j, f in enumerate(POSE_FIELDS)]
-        name, value = next((n, v) for n, v in named if not np.isfinite(v))
-        raise InputError(f"{where}: message {offset + k} has a NaN or infinite value ({name} = "
-                         f"{float(value)!r}); the log must be finite — repair or cut the "
-                         "recording")
-    if whole and n < MIN_SAMPLES:
-        raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
-                         f"{MIN_SAMPLES} samples are needed — use a longer log")
-    return Log(t=t, units=list(units), delta=np.ascontiguousarray(vals[:, :, 0]),
-               phi=np.ascontiguousarray(vals[:, :, 1:3]),
-               current=np.ascontiguousarray(vals[:, :, 3:5]), pose=pose, source=where)
-
-
-def _json_value_problem(m: Any, units: list[str], pose: bool, exc: BaseException) -> str:
-    """What is wrong with the first field of JSON message ``m`` that is not a number."""
-    paths = [("t",)] + [("units", u, f) for u in units for f in UNIT_FIELDS] \
-        + ([("pose", f) for f in POSE_FIELDS] if pose else [])
-    for path in paths:
-        v = m
-        try:
-            for key in path:
-                v = v[key]
-        except (KeyError, TypeError, IndexError):
-            return (f"lacks the log field {'.'.join(path)!r}; every message needs t and delta, "
-                    "phi_L, phi_R, cur_L, cur_R of every unit")
-        if isinstance(v, int) and not isinstance(v, bool) and abs(v) > _FLOAT_MAX:
-            return (f"has a number too large for a float in {'.'.join(path)} ({len(str(v))} "
-                    "digits; it overflows to infinity); the log must be finite — repair or cut "
-                    "the recording")
-        if not isinstance(v, int | float):
-            return (f"has {str(v)[:40]!r} in {'.'.join(path)}, which is not a number; repair or "
-                    "cut the recording")
-    return f"has a malformed log field ({type(exc).__name__}); repair or cut the recording"
-
-
-def _field(exc: BaseException) -> str:
-    if isinstance(exc, KeyError):
-        return f"no {exc.args[0]!r}"
-    return type(exc).__name__
-
-
-def _check_units(log_units: list[str], platform: Platform, where: str) -> None:
-    absent = [u for u in platform.unit_names if u not in log_units]
-    if absent:
-        raise InputError(
-            f"{where}: the log has unit{'s' if len(log_units) != 1 else ''} "
-            f"{', '.join(log_units) or '(none)'} but the platform '{platform.name}' expects units "
-            f"{', '.join(platform.unit_names)}; use the platform file that matches the log")
 
 
 __all__ = [

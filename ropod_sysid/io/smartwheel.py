@@ -40,6 +40,9 @@ unit's settings ``left_motor``, ``sign_left``, ``sign_right``, ``pivot_offset``:
   ``voltage_range`` (default [10, 60] V), and non-monotonic ``sensor_ts`` (a frame not after the
   last kept one, or a forward spike that the next frame falls back from). How many were dropped,
   why and where (frame numbers and times) goes into ``Log.notes`` and a warning.
+
+The checks and the conversion run piece by piece (:class:`ropod_sysid.io.swframes.FrameChecks`),
+so an MCAP recording streams in chunks with the same samples and note as one piece.
 """
 
 from __future__ import annotations
@@ -60,7 +63,7 @@ import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
-from ropod_sysid.io.log import Log
+from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.timebase import Gaps, check_times
 from ropod_sysid.platform import Platform
 
@@ -166,8 +169,9 @@ def _ts_value(v: Any) -> int:
 
 
 def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
-                         encoding: str = "json") -> SmartWheelFrames:
-    """Raw frames from decoded smart-wheel messages (JSON dicts or ROS 2 objects)."""
+                         encoding: str = "json", offset: int = 0) -> SmartWheelFrames:
+    """Raw frames from decoded smart-wheel messages (JSON dicts or ROS 2 objects);
+    ``offset``: the number of the first of them in the file (message 0 is checked whole)."""
     n = platform.n_units
     n_frames = len(decoded)
     ts = np.zeros((n_frames, n), dtype=np.uint64)
@@ -199,17 +203,21 @@ def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
                     vals[j, k, i] = float(get(s, name))
         except (KeyError, AttributeError, IndexError, TypeError, ValueError,
                 OverflowError) as exc:
-            if k == 0:
+            if offset + k == 0:
                 raise InputError(_first_frame_problem(exc, m, n, platform, where, sensors_of,
                                                       get)) from None
             malformed[k] = True
             ts[k] = 0
             vals[:, k] = 0.0
-        if k == 0 and len(sensors) > n:
-            notes.append(f"{where}: the smart-wheel data has {len(sensors)} sensors; the first "
-                         f"{n} are read as units {', '.join(platform.unit_names)}")
+        if offset + k == 0 and len(sensors) > n:
+            notes.append(extra_sensors_note(where, len(sensors), platform))
     return SmartWheelFrames(ts, dict(zip(REQUIRED_FLOATS, vals, strict=True)), malformed, where,
                             notes)
+
+
+def extra_sensors_note(where: str, count: int, platform: Platform) -> str:
+    return (f"{where}: the smart-wheel data has {count} sensors; the first "
+            f"{platform.n_units} are read as units {', '.join(platform.unit_names)}")
 
 
 def _first_frame_problem(exc: BaseException, m: Any, n: int, platform: Platform, where: str,
@@ -235,29 +243,6 @@ def _first_frame_problem(exc: BaseException, m: Any, n: int, platform: Platform,
             f"({' '.join(str(exc).split())[:80]}); fix the recording")
 
 
-def _monotonic(ts: np.ndarray) -> np.ndarray:
-    """Frames of a clock to keep: each after the last kept one, and no forward spikes."""
-    n = ts.shape[0]
-    keep = np.ones(n, dtype=bool)
-    if n < 2 or bool(np.all(ts[1:] > ts[:-1])):
-        return keep
-    v = ts.tolist()
-    last: int | None = None
-    for k in range(n):
-        cur = v[k]
-        if last is not None and cur <= last:
-            keep[k] = False
-            continue
-        nxt = v[k + 1] if k + 1 < n else None
-        # a forward spike: the next frame is back before this one but after the last kept
-        if nxt is not None and nxt <= cur and (last is None or nxt > last) and \
-                (last is not None or k + 2 >= n or v[k + 2] > nxt):
-            keep[k] = False
-            continue
-        last = cur
-    return keep
-
-
 def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | None = None, *,
                   voltage_range: tuple[float, float] = VOLTAGE_RANGE,
                   warn: bool = True, gaps: Gaps | None = None) -> Log:
@@ -268,79 +253,19 @@ def frames_to_log(frames: SmartWheelFrames, platform: Platform, where: str | Non
     with ``gaps`` (the file readers give it) also for a bad time base of the kept frames
     (:mod:`ropod_sysid.io.timebase`): a dropped frame leaves a step of two frames, no gap.
     """
+    from ropod_sysid.io.swframes import FrameChecks
+
     where = where or frames.source
-    ts = frames.sensor_ts
-    v = frames.values
-    n_frames = frames.n_frames
-    floats = np.stack([v[f] for f in REQUIRED_FLOATS])                 # (F, N, n)
-    reasons: list[tuple[str, np.ndarray]] = []
-    bad = frames.malformed.copy()
-    reasons.append(("malformed (missing fields or sensors)", frames.malformed.copy()))
-    zeroed = ((ts == 0) | np.all(floats == 0.0, axis=0)).any(axis=1) & ~bad
-    reasons.append(("zeroed", zeroed))
-    bad |= zeroed
-    nonfinite = ~np.isfinite(floats).all(axis=(0, 2)) & ~bad
-    reasons.append(("with NaN or infinite values", nonfinite))
-    bad |= nonfinite
-    lo, hi = voltage_range
-    vb = v["voltage_bus"]
-    volt = ~((vb >= lo) & (vb <= hi)).all(axis=1) & ~bad
-    reasons.append((f"with voltage_bus outside [{lo:g}, {hi:g}] V", volt))
-    bad |= volt
-    good = np.flatnonzero(~bad)
-    mono = np.ones(good.size, dtype=bool)
-    for i in range(ts.shape[1]):
-        mono &= _monotonic(ts[good, i])
-    nonmono = np.zeros(n_frames, dtype=bool)
-    nonmono[good[~mono]] = True
-    reasons.append(("with non-monotonic sensor_ts", nonmono))
-    bad |= nonmono
-    keep = np.flatnonzero(~bad)
-    if keep.size < MIN_SAMPLES:
-        raise InputError(
-            f"{where}: only {keep.size} of {n_frames} smart-wheel frames are usable (the others "
-            "are zeroed, out of range or out of order); at least "
-            f"{MIN_SAMPLES} samples are needed")
-
-    ts0 = ts[keep, 0]
-    rel_ns = (ts0 - ts0[0]).astype(np.int64)      # integer subtraction first, then seconds
-    t = rel_ns.astype(np.float64) / 1e9
+    checks = FrameChecks(platform, where, REQUIRED_FLOATS, voltage_range, frames.notes)
+    first = checks.push(frames.sensor_ts, frames.values, frames.malformed)
+    last, notes = checks.finish()
+    log = join_logs([p for p in (first, last) if p is not None], notes)
     if gaps is not None:
-        check_times(t, where, lambda ks: [f"frame #{keep[k]}" for k in ks], gaps)
-
-    n = platform.n_units
-    delta = np.empty((keep.size, n))
-    phi = np.empty((keep.size, n, 2))
-    cur = np.empty((keep.size, n, 2))
-    for i, u in enumerate(platform.units):
-        lm, rm = u.left_motor, 3 - u.left_motor
-        enc_l, enc_r = v[f"encoder_{lm}"][keep, i], v[f"encoder_{rm}"][keep, i]
-        phi[:, i, 0] = u.sign_left * np.unwrap(enc_l)
-        phi[:, i, 1] = u.sign_right * np.unwrap(enc_r)
-        cur[:, i, 0] = u.sign_left * v[f"current_{lm}_q"][keep, i]
-        cur[:, i, 1] = u.sign_right * v[f"current_{rm}_q"][keep, i]
-        d = np.unwrap(v["encoder_pivot"][keep, i]) - u.pivot_offset
-        d -= _TWO_PI * math.floor((d[0] + math.pi) / _TWO_PI)
-        delta[:, i] = d
-
-    notes = list(frames.notes)
-    n_bad = int(bad.sum())
-    if n_bad:
-        t_all = np.interp(np.arange(n_frames), keep, t)    # time of each frame, by position
-        parts = []
-        for label, mask in reasons:
-            idx = np.flatnonzero(mask)
-            if idx.size:
-                shown = ", ".join(f"#{k} (t≈{t_all[k]:.3f} s)" for k in idx[:5])
-                more = f" and {idx.size - 5} more" if idx.size > 5 else ""
-                parts.append(f"{idx.size} {label}: frames {shown}{more}")
-        notes.append(f"{where}: dropped {n_bad} of {n_frames} smart-wheel frames — "
-                     f"{'; '.join(parts)} (frame numbers count from 0 in file order)")
+        check_times(log.t, where, checks.locate, gaps)
     if warn:
         for note in notes:
             warnings.warn(note, stacklevel=2)
-    return Log(t=t, units=platform.unit_names, delta=delta, phi=phi, current=cur, pose=None,
-               source=where, notes=notes)
+    return log
 
 
 # ---------------------------------------------------------------------------------------------
@@ -442,8 +367,7 @@ def read_smartwheel_csv(path: str | Path, platform: Platform, gaps: Gaps = "erro
                            np.flatnonzero(nonfinite))
     notes = []
     if count > n:
-        notes.append(f"{where}: the smart-wheel data has {count} sensors; the first {n} are "
-                     f"read as units {', '.join(platform.unit_names)}")
+        notes.append(extra_sensors_note(where, count, platform))
     frames = SmartWheelFrames(ts, vals, np.zeros(n_rows, dtype=bool), where, notes)
     return frames_to_log(frames, platform, where, gaps=gaps)
 
