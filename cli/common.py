@@ -85,7 +85,7 @@ def given(name: str) -> bool:
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 platform_option = click.option(
     "--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
-    help="Platform YAML (geometry, units; see the data contract).",
+    help="Platform YAML (geometry, units; see docs/file-formats.md).",
 )
 
 

@@ -23,8 +23,9 @@ from ropod_sysid.platform import load_platform
               help="Message encoding of an .mcap OUT (default json).")
 @click.option("--layout", type=click.Choice(["contract", "smartwheel"]), default="contract",
               show_default=True,
-              help="Layout of OUT: the data-contract channels, or the smart-wheel "
-                   "(sens_ROPOD_SmartWheel_t) layout using the platform's per-unit settings.")
+              help="Layout of OUT: the tool's own log columns, or the smart-wheel "
+                   "(sens_ROPOD_SmartWheel_t) layout using the platform's per-unit settings "
+                   "(see docs/file-formats.md).")
 @quiet_option
 @reports_errors
 @writes(outputs={"out_path": "OUT"}, inputs={"in_path": "IN", "platform_path": "--platform"})

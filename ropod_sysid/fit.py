@@ -117,7 +117,8 @@ class FitResult:
                                              self.options.friction)
 
     def parameter_file(self) -> ParameterFile:
-        """The controller's parameter file (data contract), with the fit's account in extras."""
+        """The controller's parameter file (``docs/file-formats.md``), with the fit's account in
+        extras."""
         sol = self.solution
         values = self.physical.values if self.physical is not None else sol.values
         params: dict[str, dict[str, object]] = {}

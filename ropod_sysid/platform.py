@@ -1,6 +1,6 @@
 """The platform file (YAML) → geometry of the base and its wheel units.
 
-The file format is fixed by the data contract (``shared/spec/data-contract.md``); all values are
+The file format is described in ``docs/file-formats.md`` ("The platform file"); all values are
 SI. Loading is strict: every problem is reported as one :class:`~ropod_sysid.errors.InputError`
 line that names the file and the key.
 """
@@ -38,7 +38,7 @@ class UnitSpec:
     left_motor : int
         For the smart-wheel data layout: which motor (1 or 2) drives the left wheel.
     sign_left, sign_right : int
-        Sign of each motor's encoder and current relative to the contract (+1 or -1).
+        Sign of each motor's encoder and current relative to the log's conventions (+1 or -1).
     pivot_offset : float
         Pivot encoder calibration [rad], subtracted from the raw pivot angle.
     """
@@ -107,7 +107,7 @@ class Platform:
                         units, self.source)
 
     def to_dict(self) -> dict[str, Any]:
-        """The platform as the YAML mapping of the data contract."""
+        """The platform as the YAML mapping of the platform file (``docs/file-formats.md``)."""
         units = []
         for u in self.units:
             d: dict[str, Any] = {"name": u.name, "pivot": [u.pivot[0], u.pivot[1]]}
@@ -135,7 +135,7 @@ class Platform:
 
 
 def ropod_platform() -> Platform:
-    """The ropod of the thesis (Table I converted to metres, k_t of the data contract)."""
+    """The ropod of the thesis (Table I converted to metres; k_t = 0.28 N m/A)."""
     return platform_from_dict(
         {
             "name": "ropod",
@@ -160,7 +160,8 @@ def _number(data: dict[str, Any], key: str, where: str, default: float | None = 
     if key not in data:
         if default is not None:
             return default
-        raise InputError(f"{where}: missing key '{key}'; add it (SI units, see the data contract)")
+        raise InputError(f"{where}: missing key '{key}'; add it (SI units, see "
+                         "docs/file-formats.md)")
     value = data[key]
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise InputError(f"{where}: key '{key}' must be a number, got {value!r}; write a plain "

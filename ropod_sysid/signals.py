@@ -5,7 +5,7 @@ Small pure functions in the style of :mod:`scipy.signal`. Every function works a
 smoothed as six signals at once.
 
 LOESS follows the documented behaviour of MATLAB's ``smooth(y, span, 'loess')`` (restated in
-``/work/shared/spec/loess.md``; written from that description, not from MathWorks code):
+``docs/method.md``, "LOESS"; written from that description, not from MathWorks code):
 local quadratic fit, tricube weights that vanish at the farthest sample of each window, windows
 of ``k`` samples that shift rather than shrink at the ends, and for uniform sampling an even
 ``k`` made odd. For uniform sampling every interior output is the same fixed symmetric kernel,

@@ -51,6 +51,20 @@ def test_help_lists_every_command_and_version():
     assert r.exit_code == 0 and "0.1.0" in r.output
 
 
+def test_help_points_at_the_file_formats_in_the_repository():
+    from pathlib import Path
+
+    docs = Path(__file__).resolve().parent.parent / "docs"
+    for command in ("fit", "validate", "report", "simulate", "convert", "inspect"):
+        r = run(command, "--help")
+        assert r.exit_code == 0, r.output
+        text = "".join(r.output.split())  # the help is wrapped, also at hyphens
+        assert "docs/file-formats.md" in text, command
+        assert "contract" not in text.replace("[default:contract]", "").replace(
+            "[contract|smartwheel]", ""), command
+    assert (docs / "file-formats.md").is_file() and (docs / "method.md").is_file()
+
+
 def test_fit_writes_each_format(files):
     d, logs = files
     for fmt in ("json", "yaml", "ros2"):

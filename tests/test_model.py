@@ -37,7 +37,7 @@ def test_m_add_minors_match_eqs_50_51(ropod):
     m_add = model.groups[0][1].m_add(st.units[0], p)  # (N, k, 3, 3)
     r_w, d_w, s_w, dx = pf.wheel_radius, pf.wheel_distance, pf.caster_offset, pf.hub_com_offset
     th_i = q[:, 2:3] + delta
-    # eq. 50 as corrected in shared/spec/thesis-errata.md
+    # eq. 50 as corrected in docs/method.md
     m11 = (np.cos(th_i) ** 2 * (p.m_wh + 2 * p.Jrot_w / r_w**2)
            + np.sin(th_i) ** 2 * (2 * p.Jzz_wh * r_w**2 + p.Jrot_w * d_w**2
                                   + 2 * dx**2 * r_w**2 * p.m_wh) / (2 * r_w**2 * s_w**2))

@@ -63,6 +63,17 @@ def test_bad_platform_files(tmp_path, edit, message):
     assert message in text and str(p) in text and "\n" not in text
 
 
+def test_missing_key_names_the_file_formats_doc(tmp_path):
+    data = yaml.safe_load(CONTRACT)
+    del data["torque_constant"]
+    p = tmp_path / "bad.yaml"
+    p.write_text(yaml.safe_dump(data))
+    with pytest.raises(InputError) as exc:
+        load_platform(p)
+    assert str(exc.value) == (f"{p}: missing key 'torque_constant'; add it (SI units, see "
+                              "docs/file-formats.md)")
+
+
 def test_not_yaml_and_missing_file(tmp_path):
     p = tmp_path / "broken.yaml"
     p.write_text("units: [\n")

@@ -2,7 +2,7 @@
 
     python datasets/ropod/make_dataset.py
 
-Writes, beside this script: ``platform.yaml`` (the data contract's ropod), ``truth.json`` (the
+Writes, beside this script: ``platform.yaml`` (the thesis's ropod), ``truth.json`` (the
 parameters the simulation used), ``trajectory/*.csv.gz`` (the setpoints of the four variants of
 thesis Sec. VI-A, as ``ropod-sysid trajectory typical --duration 60`` writes them) and
 ``original.csv.gz`` … ``mirrored_negated.csv.gz``, their simulated runs: 100 Hz logs with

@@ -1,4 +1,4 @@
-"""The in-memory log: the channels of the data contract as arrays over samples."""
+"""The in-memory log: the log channels (``docs/file-formats.md``) as arrays over samples."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 Formats (``write_parameter_file(..., fmt=...)``):
 
 ``json``
-    The layout of the data contract, indent 2::
+    The layout of ``docs/file-formats.md``, indent 2::
 
         {"platform": "ropod",
          "parameters": {"m_b": {"value": 35.1, "std": 0.4}, ...},
