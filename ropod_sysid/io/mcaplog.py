@@ -79,7 +79,7 @@ _MAX_CHUNK = 1 << 30   # a larger uncompressed chunk size is taken for damage
 _LIBRARY = "ropod-sysid"
 
 CONTRACT_MSGDEF = """\
-# One control cycle of a ropod-sysid log: the data-contract channels of every unit (SI units).
+# One control cycle of a ropod-sysid log: the log channels of every unit (SI units).
 float64 t          # time [s]
 string[] units     # unit names, platform-file order; the arrays below follow it
 float64[] delta    # pivot angle per unit [rad]
@@ -150,7 +150,8 @@ def contract_json_schema(units: list[str], pose: bool) -> dict[str, Any]:
     schema: dict[str, Any] = {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": CONTRACT_JSON_SCHEMA,
-        "description": "One control cycle of a ropod-sysid log (data contract, SI units).",
+        "description": ("One control cycle of a ropod-sysid log (SI units; see ropod-sysid's "
+                        "docs/file-formats.md)."),
         "type": "object",
         "properties": {
             "t": {**num, "description": "time [s]"},
