@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from ropod_sysid.cli.common import (
@@ -49,18 +47,18 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     No refit: the values and standard deviations are the file's; residuals, singular values,
     rank and null space are computed on LOGS.
     """
-    from ropod_sysid.report import result_from_parameter_file, write_fit_report
+    from ropod_sysid.report import read_comparison, result_from_parameter_file, write_fit_report
 
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
-    compare = read_parameter_file(compare_path) if compare_path is not None else None
+    # a fit's parameter file, or a flat name → value mapping (a simulation's truth)
+    compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
     file_span, _, row_step = fit_settings(pfile, params_path)
     validation = pieces_of(validate_paths, platform, split_gaps, span or file_span, row_step)
     # each log streamed once: triangles and what the report draws
     result, notes = result_from_parameter_file(platform, list(logs), pfile, span,
                                                where=params_path, split_gaps=split_gaps)
-    write_fit_report(result, None, out_path, compare=compare,
-                     compare_label=Path(compare_path).name if compare_path else None,
+    write_fit_report(result, None, out_path, compare=compare, compare_label=compare_label,
                      validation_logs=validation, params_source=params_path, notes=notes)
     if not quiet:
         click.echo(f"wrote {out_path}", err=True)

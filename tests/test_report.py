@@ -394,3 +394,19 @@ def test_compare_accepts_a_flat_truth_mapping(sim, tmp_path):
     body = html.split('id="parameter-table"', 1)[1].split("</table>", 1)[0]
     m_b = next(r for r in body.split("<tr>")[2:] if ">m_b<" in r)
     assert ">35.1<" in m_b and "truth.json" in html
+
+
+def test_report_command_compares_with_a_flat_truth_mapping(files, tmp_path):
+    """``report --compare`` takes a simulation's flat truth (name: value), as ``fit`` does."""
+    import json
+
+    d, (log0, log1, _) = files
+    values = {k: v["value"] for k, v in
+              json.loads((d / "params.json").read_text())["parameters"].items()}
+    flat = tmp_path / "flat_truth.json"
+    flat.write_text(json.dumps(values))
+    out = tmp_path / "r.html"
+    r = run("report", log0, log1, "--platform", d / "platform.yaml", "--params",
+            d / "params.json", "--out", out, "--compare", flat, "--quiet")
+    assert r.exit_code == 0, r.output
+    assert "flat_truth.json" in out.read_text(encoding="utf-8")
