@@ -5,6 +5,8 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
+import stat
 import sys
 import warnings
 from collections.abc import Callable, Iterable, Mapping
@@ -15,7 +17,7 @@ import click
 from click.core import ParameterSource
 
 from ropod_sysid.errors import InputError, one_line_warning
-from ropod_sysid.io.atomic import OutputSet
+from ropod_sysid.io.atomic import OutputSet, file_kind
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -82,9 +84,33 @@ def given(name: str) -> bool:
     return ctx.get_parameter_source(name) not in (None, ParameterSource.DEFAULT)
 
 
+class InputFile(click.Path):
+    """A file the command reads. One that exists must be a regular file: a FIFO, a device or a
+    socket would block the reader or never end. A missing file is left to the reader, whose
+    message says what kind of file it expected."""
+
+    def __init__(self) -> None:
+        super().__init__(dir_okay=False)
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> Any:
+        path = super().convert(value, param, ctx)
+        try:
+            mode = os.stat(path).st_mode
+        except OSError:
+            return path
+        if not stat.S_ISREG(mode):
+            name = param.opts[0] if param is not None and param.opts and isinstance(
+                param, click.Option) else (param.human_readable_name if param else "")
+            raise OptionError(f"{name} {path}: is {file_kind(mode)}, not a regular file; "
+                              "give the file itself (copy a stream to a file first)")
+        return path
+
+
+INPUT = InputFile()
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 platform_option = click.option(
-    "--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
+    "--platform", "platform_path", required=True, type=INPUT,
     help="Platform YAML (geometry, units; see docs/file-formats.md).",
 )
 

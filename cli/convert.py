@@ -6,7 +6,7 @@ import warnings
 
 import click
 
-from ropod_sysid.cli.common import platform_option, quiet_option, reports_errors, writes
+from ropod_sysid.cli.common import INPUT, platform_option, quiet_option, reports_errors, writes
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import log_format, read_log
 from ropod_sysid.io.csvlog import write_csv_log
@@ -16,7 +16,7 @@ from ropod_sysid.platform import load_platform
 
 
 @click.command("convert", short_help="Convert a log between CSV, MCAP (JSON) and MCAP (ROS 2).")
-@click.argument("in_path", metavar="IN", type=click.Path(dir_okay=False))
+@click.argument("in_path", metavar="IN", type=INPUT)
 @click.argument("out_path", metavar="OUT", type=click.Path(dir_okay=False))
 @platform_option
 @click.option("--encoding", type=click.Choice(["json", "ros2"]), default=None,

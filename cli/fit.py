@@ -7,6 +7,7 @@ import math
 import click
 
 from ropod_sysid.cli.common import (
+    INPUT,
     SpanType,
     platform_option,
     quiet_option,
@@ -126,7 +127,7 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 
 
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
-@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("logs", nargs=-1, required=True, type=INPUT)
 @platform_option
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Parameter file to write.")
@@ -153,10 +154,10 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the HTML fit report here.")
-@click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--compare", "compare_path", type=INPUT, default=None,
               help="A parameter file (or flat truth mapping) shown side by side: in the "
                    "report, or without --report beside the printed parameter table.")
-@click.option("--validate", "validate_logs", multiple=True, type=click.Path(dir_okay=False),
+@click.option("--validate", "validate_logs", multiple=True, type=INPUT,
               help="Validation log (repeatable): in the report, or without --report the "
                    "printed validation summary (as 'ropod-sysid validate').")
 @split_gaps_option

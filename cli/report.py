@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ropod_sysid.cli.common import (
+    INPUT,
     SpanType,
     platform_option,
     quiet_option,
@@ -19,16 +20,16 @@ from ropod_sysid.regressor import Span
 
 
 @click.command("report", short_help="Write the HTML report of a parameter file on logs (no refit).")
-@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("logs", nargs=-1, required=True, type=INPUT)
 @platform_option
-@click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--params", "params_path", required=True, type=INPUT,
               help="Parameter file of a fit (json, yaml or ros2).")
 @click.option("--out", "out_path", required=True, type=click.Path(),
               help="HTML report to write (one self-contained file).")
-@click.option("--compare", "compare_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--compare", "compare_path", type=INPUT, default=None,
               help="Another parameter file shown side by side (e.g. a fixed-masses fit or the "
                    "truth of a simulation).")
-@click.option("--validate", "validate_paths", multiple=True, type=click.Path(dir_okay=False),
+@click.option("--validate", "validate_paths", multiple=True, type=INPUT,
               help="Validation log (repeatable): residuals and the disturbance observer.")
 @click.option("--span", type=SpanType(), default=None,
               help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default: the "

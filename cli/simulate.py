@@ -6,6 +6,7 @@ import click
 import numpy as np
 
 from ropod_sysid.cli.common import (
+    INPUT,
     Number,
     given,
     platform_option,
@@ -32,9 +33,9 @@ from ropod_sysid.trajectory import read_trajectory_csv
 
 @click.command("simulate", short_help="Simulate a run with known parameters; write its log.")
 @platform_option
-@click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--params", "params_path", required=True, type=INPUT,
               help="True parameters: a parameter file or a flat name: value mapping.")
-@click.option("--trajectory", "traj_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--trajectory", "traj_path", required=True, type=INPUT,
               help="Setpoint CSV with columns t, vx, vy, omega (base frame).")
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Log to write (.csv or .mcap).")
@@ -51,7 +52,7 @@ from ropod_sysid.trajectory import read_trajectory_csv
               help="Timestamp jitter, half-width of a uniform distribution [s]; less than half "
                    "the sample step.")
 @click.option("--seed", default=0, show_default=True, help="Random seed of the sensor effects.")
-@click.option("--force", "force_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--force", "force_path", type=INPUT, default=None,
               help="External force schedule CSV: t, F_bx, F_by, T_bz (base frame).")
 @click.option("--kp", default=Controller.kp, show_default=True,
               help="Wheel speed loop proportional gain [N m s/rad].")

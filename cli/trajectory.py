@@ -9,6 +9,7 @@ from typing import Any
 import click
 
 from ropod_sysid.cli.common import (
+    INPUT,
     POSITIVE_INT,
     SEED,
     Number,
@@ -116,7 +117,7 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
 @click.option("--duration", default=60.0, show_default=True,
               type=Number(0, TYPICAL_MAX_DURATION, low_open=True, unit="s"),
               help="Length of the run [s].")
-@click.option("--platform", "platform_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--platform", "platform_path", type=INPUT, default=None,
               help="Platform YAML for the pivot-rate prediction [default: the ropod].")
 @click.option("--seed", default=0, show_default=True, type=SEED,
               help="0: the reference run; other seeds vary speeds and lobe order.")
@@ -143,7 +144,7 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 
 @command.command("optimize", short_help="An optimised run (Fourier series, min. condition).")
 @limit_options
-@click.option("--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--platform", "platform_path", required=True, type=INPUT,
               help="Platform YAML (geometry for the regressor and the pivot rates).")
 @click.option("--duration", default=30.0, show_default=True,
               type=Number(OPTIMIZE_DURATION[0], OPTIMIZE_DURATION[1], unit="s"),
@@ -184,8 +185,8 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 
 
 @command.command("check", short_help="Limits, floor, pivot rates and predicted accuracy.")
-@click.argument("traj_path", metavar="TRAJ.csv", type=click.Path(dir_okay=False))
-@click.option("--platform", "platform_path", required=True, type=click.Path(dir_okay=False),
+@click.argument("traj_path", metavar="TRAJ.csv", type=INPUT)
+@click.option("--platform", "platform_path", required=True, type=INPUT,
               help="Platform YAML (geometry).")
 @limit_options
 @click.option("--noise", default=1.0, show_default=True, type=positive(),
@@ -194,7 +195,7 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="Sample rate of the logs the fit will use [Hz].")
 @click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
               show_default=True, help="Friction coefficients per wheel or shared.")
-@click.option("--params", "params_path", type=click.Path(dir_okay=False), default=None,
+@click.option("--params", "params_path", type=INPUT, default=None,
               help="True parameter values for relative stds [default: thesis fixed masses].")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Plot of the path and the setpoints (.png or .svg).")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ropod_sysid.cli.common import (
+    INPUT,
     SpanType,
     json_text,
     platform_option,
@@ -23,9 +24,9 @@ from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
 
 
 @click.command("validate", short_help="Check a fitted model on logs it was not fitted on.")
-@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("logs", nargs=-1, required=True, type=INPUT)
 @platform_option
-@click.option("--params", "params_path", required=True, type=click.Path(dir_okay=False),
+@click.option("--params", "params_path", required=True, type=INPUT,
               help="Parameter file of a fit.")
 @click.option("--span", type=SpanType(), default=None,
               help="LOESS span: an odd number of samples or seconds (default: the fit's).")

@@ -398,3 +398,22 @@ def test_a_full_disk_is_one_line_and_leaves_no_file(tmp_path):
         tmp.write_text("part")
         raise OSError(28, "No space left on device")
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("where", ["LOGS", "--platform", "--params"])
+def test_an_input_that_is_a_fifo_is_refused_not_waited_on(files, tmp_path, where):
+    """Opening a FIFO for reading blocks until something writes to it: refused when parsed."""
+    d = files
+    fifo = tmp_path / "stream"
+    os.mkfifo(fifo)
+    paths = {"LOGS": d / "run0.csv", "--platform": d / "platform.yaml",
+             "--params": d / "params.json"}
+    paths[where] = fifo
+    p = subprocess.run([str(Path(sys.executable).parent / "ropod-sysid"), "validate",
+                        str(paths["LOGS"]), "--platform", str(paths["--platform"]),
+                        "--params", str(paths["--params"])],
+                       capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.strip().splitlines() == [
+        f"error: {where} {fifo}: is a FIFO, not a regular file; give the file itself (copy a "
+        "stream to a file first)"]

@@ -38,7 +38,8 @@ _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
           (stat.S_ISSOCK, "a socket"))
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a file of ``os.stat`` mode ``mode`` is, in words ("a FIFO", "a directory" …)."""
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
@@ -59,7 +60,7 @@ def write_target(path: PathLike, label: str | None = None) -> Path:
     if not stat.S_ISREG(mode):
         fix = ("give the file name inside it" if stat.S_ISDIR(mode)
                else "only a regular file is written; give a file name")
-        raise InputError(f"{_name(label, path)}: is {_kind(mode)}; {fix}")
+        raise InputError(f"{_name(label, path)}: is {file_kind(mode)}; {fix}")
     return target
 
 
