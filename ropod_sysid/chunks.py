@@ -27,6 +27,7 @@ from ropod_sysid.platform import Platform
 DEFAULT_CHUNK = 30_000  # samples per chunk read and per block (25–30k measured fastest)
 Source = str | Path | Log
 
+
 # ---------------------------------------------------------------------------------------------
 # chunk sources
 
