@@ -24,6 +24,10 @@ the only step whose rounding depends on the block). Memory is bounded by the chu
 the halo. The rotational weight needs the mean squares of b_ID, which the per-DOF triangles
 give after the pass (:meth:`Triangles.mean_square_b`).
 
+The chunks come from :mod:`ropod_sysid.chunks` (:func:`iter_chunks`, read ahead in a thread)
+and steps 1–2 are :mod:`ropod_sysid.grid`; this module holds step 3 (the block reducer), the
+passes over a log or its pieces and the entry points.
+
 :func:`validate_source` does the same for validation: the disturbance observer's causal
 low-pass keeps its filter state across blocks.
 
@@ -34,37 +38,35 @@ of the next, each passed through steps 1–3 as a log of its own.
 
 from __future__ import annotations
 
-import contextlib
 import math
-import queue
-import threading
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from ropod_sysid import signals
-from ropod_sysid.errors import InputError
-from ropod_sysid.io.log import Log
-from ropod_sysid.io.timebase import (
-    Gaps,
-    TimeBase,
-    checked_chunks,
-    piece_name,
-    piece_note,
-    split_chunks,
+from ropod_sysid.chunks import (
+    DEFAULT_CHUNK,
+    Source,
+    _is_smartwheel,
+    _prefetch,
+    iter_chunks,
+    single_thread_blas,
+    source_name,
 )
+from ropod_sysid.errors import InputError
+from ropod_sysid.grid import _Grid, _OffGrid, _Samples
+from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import piece_name, piece_note, split_chunks
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_from
+from ropod_sysid.odometry import OdometryState, odometry_from
 from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
-    GRID_STEPS,
     Preprocessed,
     RowGrid,
     Span,
@@ -73,11 +75,8 @@ from ropod_sysid.regressor import (
     check_input_delay,
     check_length,
     check_piece_samples,
-    grid_step,
-    jitter_note,
     left_out,
     no_piece_left,
-    on_grid,
     row_inputs,
     row_system,
 )
@@ -91,9 +90,7 @@ from ropod_sysid.validate import (
     observer_step,
 )
 
-DEFAULT_CHUNK = 30_000  # samples per chunk read and per block (25–30k measured fastest)
 ROWS_IN_FLIGHT = 2  # blocks whose rows the worker thread may still be reducing
-Source = str | Path | Log
 
 
 # ---------------------------------------------------------------------------------------------
@@ -128,304 +125,7 @@ class StreamResult:
 
 
 # ---------------------------------------------------------------------------------------------
-# chunk sources
-
-
-def _iter_path(path: Path, platform: Platform, chunk: int, gaps: Gaps) -> Iterator[Log]:
-    name = path.name.lower()
-    if name.endswith((".csv", ".csv.gz")):
-        if name.endswith(".csv"):
-            try:
-                from ropod_sysid.io import smartwheel
-            except ImportError:  # pragma: no cover - the smart-wheel layout is optional
-                smartwheel = None  # type: ignore[assignment]
-            if smartwheel is not None and _is_smartwheel(smartwheel, path):
-                # the robot's raw layout needs whole-log processing (frame checks, rates)
-                yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform, gaps),
-                                     chunk)
-                return
-        from ropod_sysid.io.csvlog import iter_csv_log
-
-        yield from iter_csv_log(path, platform, chunk, gaps)
-        return
-    if name.endswith(".mcap"):
-        from ropod_sysid.io.mcaplog import iter_mcap_log
-
-        yield from iter_mcap_log(path, platform, chunk, gaps)
-        return
-    suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
-    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
-
-
-def _is_smartwheel(module: object, path: Path) -> bool:
-    """Whether a .csv is the robot's raw smart-wheel layout (read by its own reader)."""
-    test = getattr(module, "is_smartwheel_csv", None)
-    return bool(test is not None and test(path))
-
-
-def _iter_log(log: Log, chunk: int) -> Iterator[Log]:
-    for start in range(0, max(log.n_samples, 1), chunk):
-        yield log.slice(start, start + chunk)
-
-
-def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
-                gaps: Gaps = "error") -> Iterator[Log]:
-    """The samples of a log file (or an in-memory :class:`Log`) as consecutive logs of at most
-    ``chunk`` samples, read as they are needed, their time base checked
-    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"`` lets gaps through)."""
-    if isinstance(source, Log):
-        return checked_chunks(_iter_log(source, chunk), TimeBase(source.source, gaps=gaps))
-    return _iter_path(Path(source), platform, chunk, gaps)
-
-
-def source_name(source: Source) -> str:
-    return source.source if isinstance(source, Log) else str(source)
-
-
-def _prefetch(chunks: Iterator[Log], depth: int = 2) -> Iterator[Log]:
-    """Read the next chunks in a background thread (Arrow parses without the GIL) while the
-    current one is processed; exceptions surface in order."""
-    q: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-    done = object()
-
-    def work() -> None:
-        try:
-            for item in chunks:
-                while not stop.is_set():
-                    try:
-                        q.put(item, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            q.put(done)
-        except BaseException as exc:  # handed to the consumer
-            q.put(exc)
-        finally:
-            close = getattr(chunks, "close", None)
-            if close is not None:
-                close()
-
-    thread = threading.Thread(target=work, daemon=True, name="ropod-sysid-reader")
-    thread.start()
-    try:
-        while True:
-            item = q.get()
-            if item is done:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-    finally:
-        stop.set()
-        with contextlib.suppress(queue.Empty):
-            while True:
-                q.get_nowait()
-        thread.join()
-
-
-# ---------------------------------------------------------------------------------------------
-# BLAS threads
-
-
-_blas_lock = threading.Lock()
-_blas_users = 0
-_blas_limits: threadpool_limits | None = None
-
-
-@contextlib.contextmanager
-def single_thread_blas() -> Iterator[None]:
-    """Run the block computations with one BLAS thread (threadpoolctl).
-
-    The blocks are tall and thin (QR leaves of 256 × 30, batched 3 × 3 solves); threaded
-    OpenBLAS gains nothing there and, on a busy machine, loses several-fold to spinning
-    threads. The setting is process-wide: the first of concurrent users (e.g. Dask worker
-    threads) sets it, the last restores it.
-    """
-    global _blas_users, _blas_limits
-    with _blas_lock:
-        if _blas_users == 0:
-            _blas_limits = threadpool_limits(limits=1, user_api="blas")
-        _blas_users += 1
-    try:
-        yield
-    finally:
-        with _blas_lock:
-            _blas_users -= 1
-            if _blas_users == 0 and _blas_limits is not None:
-                _blas_limits.restore_original_limits()
-                _blas_limits = None
-
-
-# ---------------------------------------------------------------------------------------------
-# the pass
-
-
-class _OffGrid(Exception):
-    """A step off the sample grid found after the head of a log (of a piece of it, with
-    --split-gaps): the pass restarts, resampling that piece."""
-
-
-@dataclass
-class _Samples:
-    """Consecutive grid samples: t (m,), delta (m, n), phi (m, n, 2), current (m, n, 2),
-    pose (m, 3) or None."""
-
-    t: np.ndarray
-    delta: np.ndarray
-    phi: np.ndarray
-    current: np.ndarray
-    pose: np.ndarray | None
-
-    def __len__(self) -> int:
-        return self.t.shape[0]
-
-    def take(self, start: int, stop: int) -> _Samples:
-        pose = None if self.pose is None else self.pose[start:stop]
-        return _Samples(self.t[start:stop], self.delta[start:stop], self.phi[start:stop],
-                        self.current[start:stop], pose)
-
-    @staticmethod
-    def join(parts: list[_Samples]) -> _Samples:
-        if len(parts) == 1:
-            return parts[0]
-        pose = None if parts[0].pose is None else np.concatenate([p.pose for p in parts])
-        return _Samples(np.concatenate([p.t for p in parts]),
-                        np.concatenate([p.delta for p in parts]),
-                        np.concatenate([p.phi for p in parts]),
-                        np.concatenate([p.current for p in parts]), pose)
-
-
-class _Grid:
-    """Steps 1–2: unwrapping and the uniform grid, continued from chunk to chunk."""
-
-    def __init__(self, source: str, resample: bool, sink: _Blocks) -> None:
-        self.source = source
-        self.resample = resample
-        self.sink = sink
-        self.head: list[_Samples] = []
-        self.dt: float | None = None
-        self.t0 = 0.0
-        self.tail: _Samples | None = None  # last two samples (steps, interpolation brackets)
-        self.next_k = 0  # next grid index to emit (resampling)
-        self.max_step = -np.inf
-        self.min_step = np.inf
-        self.unwrap_delta: _Unwrap | None = None
-        self.unwrap_theta: _Unwrap | None = None
-        self.unwrap_grid: _Unwrap | None = None
-        self.has_pose: bool | None = None
-
-    def push(self, log: Log) -> None:
-        if log.n_samples == 0:
-            return
-        if self.has_pose is None:
-            self.has_pose = log.pose is not None
-        elif self.has_pose != (log.pose is not None):
-            raise InputError(f"{self.source}: the tracker pose is given on part of the log "
-                             "only; give x_b, y_b, theta_b on every sample or on none")
-        delta, self.unwrap_delta = _unwrap(log.delta, self.unwrap_delta)
-        pose = None
-        if log.pose is not None:
-            theta, self.unwrap_theta = _unwrap(log.pose[:, 2], self.unwrap_theta)
-            pose = np.column_stack([log.pose[:, :2], theta])
-        raw = _Samples(np.asarray(log.t, float), delta, np.asarray(log.phi, float),
-                       np.asarray(log.current, float), pose)
-        if self.dt is None:
-            self.head.append(raw)
-            if sum(len(h) for h in self.head) > GRID_STEPS:
-                self._start(final=False)
-            return
-        self._emit(raw, final=False)
-
-    def _start(self, final: bool) -> None:
-        head = _Samples.join(self.head)
-        self.head = []
-        self.dt = grid_step(head.t)
-        self.t0 = float(head.t[0])
-        if not self.resample and not on_grid(np.diff(head.t), self.dt):
-            self.resample = True
-        self.sink.start(self.dt)
-        self._emit(head, final)
-
-    def _emit(self, raw: _Samples, final: bool) -> None:
-        src = raw if self.tail is None else _Samples.join([self.tail, raw])
-        lead = 0 if self.tail is None else len(self.tail) - 1
-        steps = np.diff(src.t[lead:])
-        if steps.size:  # (time increases: iter_chunks checked it, ropod_sysid.io.timebase)
-            self.max_step = max(self.max_step, float(steps.max()))
-            self.min_step = min(self.min_step, float(steps.min()))
-        if not self.resample:
-            if not on_grid(steps, self.dt):  # type: ignore[arg-type]
-                raise _OffGrid
-            self.sink.push(raw)
-        else:
-            self._resample(src, final)
-        self.tail = src.take(max(len(src) - 2, 0), len(src))
-
-    def _resample(self, src: _Samples, final: bool) -> None:
-        """Grid points t0 + k dt among the samples seen so far, by the formula of
-        :func:`ropod_sysid.signals.resample_uniform` on the whole log (the last point, at the
-        end, clipped to the last sample time)."""
-        t, dt = src.t, self.dt
-        assert dt is not None
-        if final:
-            m = int(np.floor((t[-1] - self.t0) / dt * (1 + 1e-12) + 1e-9)) + 1
-        else:
-            m = int(np.floor((t[-1] - self.t0) / dt)) + 2
-        tk = self.t0 + dt * np.arange(self.next_k, max(m, self.next_k), dtype=float)
-        tk = np.minimum(tk, t[-1]) if final else tk[tk < t[-1]]
-        if not tk.size:
-            return
-        if len(t) < 2:
-            raise InputError(f"{self.source}: only one sample; a log needs more")
-        idx = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, len(t) - 2)
-        frac = (tk - t[idx]) / (t[idx + 1] - t[idx])
-
-        def at(y: np.ndarray) -> np.ndarray:
-            f = frac.reshape((-1,) + (1,) * (y.ndim - 1))
-            return y[idx] + f * (y[idx + 1] - y[idx])
-
-        pose = None
-        if src.pose is not None:
-            pose = at(src.pose)
-            pose[:, 2], self.unwrap_grid = _unwrap(pose[:, 2], self.unwrap_grid)
-        self.sink.push(_Samples(tk, at(src.delta), at(src.phi), at(src.current), pose))
-        self.next_k += tk.size
-
-    def finish(self) -> list[str]:
-        if self.dt is None:
-            if not self.head:
-                raise InputError(f"{self.source}: the log has no samples")
-            self._start(final=True)
-        elif self.resample:
-            assert self.tail is not None
-            self._resample(self.tail, final=True)
-        notes = []
-        if self.resample:
-            notes.append(jitter_note(self.source, self.max_step, self.min_step,
-                                     self.dt))  # type: ignore[arg-type]
-        return notes
-
-
-@dataclass
-class _Unwrap:
-    """Where np.unwrap of a signal stands after a piece: last raw sample, its correction."""
-
-    last: np.ndarray
-    corr: np.ndarray
-
-
-def _unwrap(p: np.ndarray, state: _Unwrap | None) -> tuple[np.ndarray, _Unwrap]:
-    """np.unwrap along axis 0 of the next piece of a signal (bit-identical to one call)."""
-    p = np.asarray(p, float)
-    if state is None:
-        up, corr = unwrap_from(p)
-    else:
-        up, corr = unwrap_from(np.concatenate([state.last[None], p]), state.corr)
-        up, corr = up[1:], corr[1:]
-    return up, _Unwrap(p[-1].copy(), corr[-1].copy())
+# the pass: step 3
 
 
 class _Blocks:

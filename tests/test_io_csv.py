@@ -7,7 +7,7 @@ import pyarrow as pa
 import pytest
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.io import csvlog
+from ropod_sysid.io import csvdiagnose, csvlog
 from ropod_sysid.io.csvlog import contract_columns, read_csv_log, write_csv_log
 from ropod_sysid.io.log import Log
 from ropod_sysid.platform import ropod_platform
@@ -22,7 +22,7 @@ def locate_mode(request, monkeypatch):
     """Every test runs with each way of locating errors: Arrow streaming in one block, in many
     small blocks (read-ahead across blocks), and the row-by-row csv-module fallback."""
     if request.param == "small-blocks":
-        monkeypatch.setattr(csvlog, "_DIAG_BLOCK", 300)
+        monkeypatch.setattr(csvdiagnose, "_DIAG_BLOCK", 300)  # (the checked path's block)
     elif request.param == "csv-module":
         def refuse(*args, **kwargs):
             raise pa.ArrowInvalid("forced fallback")

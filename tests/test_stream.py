@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ropod_sysid import regressor, stream
+from ropod_sysid import grid, regressor, stream
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files, fit_logs
 from ropod_sysid.io.csvlog import iter_csv_log, read_csv_log, write_csv_log
@@ -107,7 +107,7 @@ def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, mo
     """Steps off the grid only after the head: the pass restarts in resampling mode and still
     equals the in-memory path."""
     monkeypatch.setattr(regressor, "GRID_STEPS", 300)
-    monkeypatch.setattr(stream, "GRID_STEPS", 300)
+    monkeypatch.setattr(grid, "GRID_STEPS", 300)  # (the grid of the pass, ropod_sysid.grid)
     run = runs_off_square[2]
     jit = jittered(off_square, run)
     t = run.log.t.copy()

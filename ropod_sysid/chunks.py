@@ -1,0 +1,160 @@
+"""The chunked pass's sources and threads: a log's chunks, read ahead; one BLAS thread.
+
+:func:`iter_chunks` gives the samples of a log file (:func:`ropod_sysid.io.csvlog.iter_csv_log`
+for CSV, also ``.csv.gz``; :func:`ropod_sysid.io.mcaplog.iter_mcap_log` for MCAP; a smart-wheel
+CSV is read whole and then cut) or of an in-memory :class:`Log` as consecutive logs of at most
+``chunk`` samples, their time base checked (:mod:`ropod_sysid.io.timebase`). :func:`_prefetch`
+reads the next chunks in a background thread while one is processed, and
+:func:`single_thread_blas` runs the block computations of :mod:`ropod_sysid.stream` with one
+BLAS thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import queue
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+from threadpoolctl import threadpool_limits
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import Gaps, TimeBase, checked_chunks
+from ropod_sysid.platform import Platform
+
+DEFAULT_CHUNK = 30_000  # samples per chunk read and per block (25–30k measured fastest)
+Source = str | Path | Log
+
+
+# ---------------------------------------------------------------------------------------------
+# chunk sources
+
+
+def _iter_path(path: Path, platform: Platform, chunk: int, gaps: Gaps) -> Iterator[Log]:
+    name = path.name.lower()
+    if name.endswith((".csv", ".csv.gz")):
+        if name.endswith(".csv"):
+            try:
+                from ropod_sysid.io import smartwheel
+            except ImportError:  # pragma: no cover - the smart-wheel layout is optional
+                smartwheel = None  # type: ignore[assignment]
+            if smartwheel is not None and _is_smartwheel(smartwheel, path):
+                # the robot's raw layout needs whole-log processing (frame checks, rates)
+                yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform, gaps),
+                                     chunk)
+                return
+        from ropod_sysid.io.csvlog import iter_csv_log
+
+        yield from iter_csv_log(path, platform, chunk, gaps)
+        return
+    if name.endswith(".mcap"):
+        from ropod_sysid.io.mcaplog import iter_mcap_log
+
+        yield from iter_mcap_log(path, platform, chunk, gaps)
+        return
+    suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
+    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+
+
+def _is_smartwheel(module: object, path: Path) -> bool:
+    """Whether a .csv is the robot's raw smart-wheel layout (read by its own reader)."""
+    test = getattr(module, "is_smartwheel_csv", None)
+    return bool(test is not None and test(path))
+
+
+def _iter_log(log: Log, chunk: int) -> Iterator[Log]:
+    for start in range(0, max(log.n_samples, 1), chunk):
+        yield log.slice(start, start + chunk)
+
+
+def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
+                gaps: Gaps = "error") -> Iterator[Log]:
+    """The samples of a log file (or an in-memory :class:`Log`) as consecutive logs of at most
+    ``chunk`` samples, read as they are needed, their time base checked
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"`` lets gaps through)."""
+    if isinstance(source, Log):
+        return checked_chunks(_iter_log(source, chunk), TimeBase(source.source, gaps=gaps))
+    return _iter_path(Path(source), platform, chunk, gaps)
+
+
+def source_name(source: Source) -> str:
+    return source.source if isinstance(source, Log) else str(source)
+
+
+def _prefetch(chunks: Iterator[Log], depth: int = 2) -> Iterator[Log]:
+    """Read the next chunks in a background thread (Arrow parses without the GIL) while the
+    current one is processed; exceptions surface in order."""
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def work() -> None:
+        try:
+            for item in chunks:
+                while not stop.is_set():
+                    try:
+                        q.put(item, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            q.put(done)
+        except BaseException as exc:  # handed to the consumer
+            q.put(exc)
+        finally:
+            close = getattr(chunks, "close", None)
+            if close is not None:
+                close()
+
+    thread = threading.Thread(target=work, daemon=True, name="ropod-sysid-reader")
+    thread.start()
+    try:
+        while True:
+            item = q.get()
+            if item is done:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        with contextlib.suppress(queue.Empty):
+            while True:
+                q.get_nowait()
+        thread.join()
+
+
+# ---------------------------------------------------------------------------------------------
+# BLAS threads
+
+
+_blas_lock = threading.Lock()
+_blas_users = 0
+_blas_limits: threadpool_limits | None = None
+
+
+@contextlib.contextmanager
+def single_thread_blas() -> Iterator[None]:
+    """Run the block computations with one BLAS thread (threadpoolctl).
+
+    The blocks are tall and thin (QR leaves of 256 × 30, batched 3 × 3 solves); threaded
+    OpenBLAS gains nothing there and, on a busy machine, loses several-fold to spinning
+    threads. The setting is process-wide: the first of concurrent users (e.g. Dask worker
+    threads) sets it, the last restores it.
+    """
+    global _blas_users, _blas_limits
+    with _blas_lock:
+        if _blas_users == 0:
+            _blas_limits = threadpool_limits(limits=1, user_api="blas")
+        _blas_users += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas_users -= 1
+            if _blas_users == 0 and _blas_limits is not None:
+                _blas_limits.restore_original_limits()
+                _blas_limits = None
