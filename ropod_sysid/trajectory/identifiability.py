@@ -1,0 +1,109 @@
+"""The predicted regressor along planned motions and what it says (thesis eqs. 35, 36, 66).
+
+The stacked regressor A_ID,ext of the four variants, evaluated along the planned motion (q, q̇, q̈
+in the world frame), tells before a run whether its data identify the parameters: the condition
+number and rank of the column-scaled regressor (:func:`conditioning`) and the predicted standard
+deviation of every parameter of a least-squares fit under white noise on b_ID [N, N m]
+(:func:`predicted_std`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ropod_sysid.trajectory.setpoints import integrate_pose
+
+
+def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = None,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World-frame q, q̇, q̈ (..., N, 3) of base-frame twists (..., N, 3) starting at zero.
+
+    ``rates`` are the twist derivatives (second-order differences if not given).
+    """
+    if rates is None:
+        rates = np.gradient(twist, t, axis=-2, edge_order=2)
+    x, y, th = integrate_pose(t, twist[..., 0], twist[..., 1], twist[..., 2])
+    c, s = np.cos(th), np.sin(th)
+    vx, vy, w = twist[..., 0], twist[..., 1], twist[..., 2]
+    ax = rates[..., 0] - w * vy
+    ay = rates[..., 1] + w * vx
+    q = np.stack([x, y, th], axis=-1)
+    qd = np.stack([c * vx - s * vy, s * vx + c * vy, w], axis=-1)
+    qdd = np.stack([c * ax - s * ay, s * ax + c * ay, rates[..., 2]], axis=-1)
+    return q, qd, qdd
+
+
+def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                    delta: np.ndarray, friction: str, chunk: int = 20000) -> np.ndarray:
+    """A_ID,ext (M, 3, p) at M samples (chunked to bound the memory)."""
+    out = []
+    for k in range(0, q.shape[0], chunk):
+        sl = slice(k, k + chunk)
+        st = model.state(q[sl], qd[sl], delta[sl])  # type: ignore[attr-defined]
+        out.append(model.a_id_ext(st, qdd[sl], friction))  # type: ignore[attr-defined]
+    return np.concatenate(out, axis=0)
+
+
+@dataclass
+class Conditioning:
+    """Column-scaled singular values of a stacked regressor and what they say.
+
+    singular_values : descending, of A with every column scaled to unit norm (as
+        :func:`ropod_sysid.solve.solve` does)
+    rank : number of singular values above ``1e-9 σ_max`` (the identifiable subspace)
+    condition_number : σ_max / σ_rank — on the identifiable subspace
+    condition_number_full : σ_max / σ_min over all columns (inf when rank deficient)
+    """
+
+    singular_values: np.ndarray
+    rank: int
+    condition_number: float
+    condition_number_full: float
+
+
+RANK_TOL = 1e-9
+
+
+def conditioning(a: np.ndarray) -> Conditioning:
+    """:class:`Conditioning` of a stacked regressor (M, p) (or (…, 3, p) rows)."""
+    a = a.reshape(-1, a.shape[-1])
+    norms = np.linalg.norm(a, axis=0)
+    sv = np.linalg.svd(a / np.where(norms > 0, norms, 1.0), compute_uv=False)
+    if sv.size == 0 or sv[0] == 0:
+        return Conditioning(sv, 0, math.inf, math.inf)
+    rank = int(np.sum(sv > RANK_TOL * sv[0]))
+    full = float(sv[0] / sv[-1]) if rank == sv.size else math.inf
+    return Conditioning(sv, rank, float(sv[0] / sv[rank - 1]), full)
+
+
+def predicted_std(a: np.ndarray, noise: float | tuple[float, float] = 1.0,
+                  rows_per_second: float = 1.0, tol: float = RANK_TOL) -> np.ndarray:
+    """Predicted standard deviation of each parameter (p,) of a least-squares fit.
+
+    Parameters
+    ----------
+    a : (M, 3, p) regressor rows sampled at ``rows_per_second`` samples per second of run
+    noise : σ of b_ID, white: one value for every row, or (translation [N], rotation [N m])
+    rows_per_second : the log samples each evaluated sample stands for: the information of a
+        log at rate r_log evaluated at rate r_eval is r_log / r_eval times that of the rows
+
+    Returns σ·sqrt(diag((AᵀWA)⁺)) with W = diag(1/σ²); parameters the data determine only in
+    combination with others (outside the identifiable subspace) get inf.
+    """
+    sig = (noise, noise) if isinstance(noise, int | float) else noise
+    w = np.array([1.0 / sig[0], 1.0 / sig[0], 1.0 / sig[1]])
+    aw = (a * w[None, :, None]).reshape(-1, a.shape[-1]) * math.sqrt(rows_per_second)
+    norms = np.linalg.norm(aw, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
+    _, sv, vt = np.linalg.svd(aw / scale, full_matrices=False)
+    if sv.size == 0 or sv[0] == 0:
+        return np.full(a.shape[-1], math.inf)
+    r = int(np.sum(sv > tol * sv[0]))
+    vr = vt[:r].T  # (p, r)
+    cov_diag = ((vr / sv[:r]) ** 2).sum(axis=1) / scale**2
+    # a unit vector e_j is identifiable when it lies in the row space span(vr)
+    inside = np.linalg.norm(vr, axis=1) > 1 - 1e-6
+    return np.where(inside & (norms > 0), np.sqrt(cov_diag), math.inf)

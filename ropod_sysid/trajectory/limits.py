@@ -1,0 +1,80 @@
+"""Limits and floor of an identification run (thesis Sec. VI-A, VII-C).
+
+Limits, as in the thesis's experiments: |v| = |(vx, vy)| ≤ v_max [m/s], |a| ≤ a_max [m/s²] (the
+world acceleration of the base origin, centripetal part included), |ω| ≤ ω_max [rad/s],
+|ω̇| ≤ α_max [rad/s²], |δ̇_i| ≤ pivot_rate_max [rad/s] (the disturbance observer ignores the data
+above 1.5 rad/s, Sec. VII-C). The floor is the rectangle (x_min, x_max, y_min, y_max) [m] the base
+origin must stay in, in the world frame of the planned pose (start at the origin). A run that
+cannot be planned within them raises :class:`PlanningError`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ropod_sysid.errors import InputError
+
+Floor = tuple[float, float, float, float]
+DEFAULT_FLOOR: Floor = (-3.0, 3.0, -2.0, 2.0)
+# typical(), optimize(): the pivot rate (quasi-steady) is planned at 80 % of its limit
+PIVOT_DESIGN_MARGIN = 0.8
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Limits of an identification run (defaults: the thesis's experiments, Sec. VI-A, VII-C).
+
+    Attributes
+    ----------
+    v_max : float
+        Speed of the base origin |(vx, vy)| [m/s].
+    a_max : float
+        Acceleration of the base origin in the world frame, centripetal part included [m/s²].
+    w_max : float
+        Rotation rate |ω| [rad/s].
+    alpha_max : float
+        Rotational acceleration |ω̇| [rad/s²].
+    pivot_rate_max : float or None
+        Pivot rate |δ̇_i| of every unit [rad/s], predicted with the kinematic model; None: no
+        limit (wheel flips allowed).
+    """
+
+    v_max: float = 1.0
+    a_max: float = 1.0
+    w_max: float = 1.0
+    alpha_max: float = 1.0
+    pivot_rate_max: float | None = 1.5
+
+    def __post_init__(self) -> None:
+        for name in ("v_max", "a_max", "w_max", "alpha_max", "pivot_rate_max"):
+            value = getattr(self, name)
+            if value is None and name == "pivot_rate_max":
+                continue
+            if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+                raise InputError(f"limit {name} must be a positive number, got {value!r}")
+
+    def scaled(self, factor: float, pivot_factor: float | None = None) -> Limits:
+        """All limits times ``factor`` (the pivot rate times ``pivot_factor`` if given)."""
+        pf = factor if pivot_factor is None else pivot_factor
+        return Limits(self.v_max * factor, self.a_max * factor, self.w_max * factor,
+                      self.alpha_max * factor,
+                      None if self.pivot_rate_max is None else self.pivot_rate_max * pf)
+
+
+def _check_floor(floor: Sequence[float]) -> Floor:
+    if len(floor) != 4:
+        raise InputError("floor must be four numbers: x_min x_max y_min y_max [m]")
+    x0, x1, y0, y1 = (float(v) for v in floor)
+    if not all(math.isfinite(v) for v in (x0, x1, y0, y1)):
+        raise InputError("floor bounds must be finite numbers [m]")
+    if not (x0 < 0 < x1 and y0 < 0 < y1):
+        raise InputError(
+            f"floor ({x0:g}, {x1:g}, {y0:g}, {y1:g}) must contain the start pose (0, 0) strictly "
+            "inside: give x_min < 0 < x_max and y_min < 0 < y_max")
+    return (x0, x1, y0, y1)
+
+
+class PlanningError(InputError):
+    """A typical run cannot be planned within the limits (one line, CLI exit 2)."""

@@ -1,0 +1,369 @@
+"""The "typical" identification run of the thesis (Sec. VI-A): :func:`typical`.
+
+Straights, corners, rotations, constant velocity and acceleration, from rest to rest: a chain of
+loops ("lobes") through the start, sized to the floor [m] and closed exactly, every twist change
+a minimum-jerk blend within the limits (:mod:`ropod_sysid.trajectory.blends`), wheel flips
+planned out and the pivot rates predicted with eq. 8a checked for all four variants.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.platform import Platform, ropod_platform
+from ropod_sysid.trajectory.blends import _path, _Plan, _sample
+from ropod_sysid.trajectory.limits import (
+    DEFAULT_FLOOR,
+    PIVOT_DESIGN_MARGIN,
+    Floor,
+    Limits,
+    PlanningError,
+    _check_floor,
+)
+from ropod_sysid.trajectory.pivots import predict_pivots
+from ropod_sysid.trajectory.run_variants import _off_floor, variants
+from ropod_sysid.trajectory.setpoints import Trajectory
+
+TYPICAL_MAX_DURATION = 3600.0  # typical(): the longest run [s] (an hour of driving)
+SPIN_START_MIN = 30.0  # typical(): runs this long [s] or longer start with a rotation in place
+DESIGN_MARGIN = 0.9  # typical(): every limit is planned at 90 % of its value
+
+
+@dataclass
+class _Design:
+    """Speeds and rates of a typical run."""
+
+    v: float  # cruise speed on the long straights [m/s]
+    v_corner: float  # speed in corners and on the short sides [m/s]
+    v_spin: float  # speed at which a rotation in place is entered [m/s]
+    w_corner: float  # corner rate [rad/s]
+    w_spin: float  # rotation rate in place [rad/s]
+    pause: float  # rest in a stop-and-go [s]
+
+
+# lobe kinds of the typical run, in order: corners with a rotation in place, crab (lateral)
+LOBES: tuple[tuple[str, bool], ...] = (("drive", False), ("crab", True), ("drive", True),
+                                       ("crab", False))
+
+
+def _lobe(plan: _Plan, kind: str, size: tuple[float, float], design: _Design, mirror: bool,
+          first: bool) -> list[list[int]]:
+    """One lobe of the run: a loop from the start back to it, at cruise speed along +x there.
+
+    ``drive``: a rounded rectangle with four corners (left ones, right ones when mirrored), the
+    first with a whole rotation in place. ``crab``: the same loop at constant heading — the
+    short sides driven sideways (vy), the long side backwards with a stop-and-go — turning the
+    direction of travel in the base frame instead of the heading. ``size`` = (e, c): length of
+    the half straights through the start and of the second short side [m]. Returns groups of
+    hold indices to solve for closure (x, then y).
+    """
+    sgn = -1.0 if mirror else 1.0
+    cruise = np.array([design.v, 0.0, 0.0])
+    slow = np.array([design.v_corner, 0.0, 0.0])
+    e, c = size
+    if first:
+        plan.to(cruise)
+    plan.hold(e / design.v)
+    plan.to(slow)
+    if kind == "drive":
+        plan.corner(sgn * math.pi / 2, design.w_corner)
+        k_y = plan.hold(0.0)
+        plan.corner(sgn * math.pi / 2, design.w_corner)
+        plan.to(cruise)
+        k_x = plan.hold(0.0)
+        plan.to(slow)
+        plan.corner(sgn * math.pi / 2, design.w_corner)
+        plan.hold(c / design.v_corner)
+        plan.corner(sgn * math.pi / 2, design.w_corner)
+        groups = [[k_x], [k_y]]
+    else:
+        side = np.array([0.0, sgn * design.v_corner, 0.0])
+        plan.to(side)
+        k_y = plan.hold(0.0)
+        plan.to(-slow)
+        plan.to(-cruise)
+        k_x1 = plan.hold(0.0)
+        plan.stop_and_go(design.pause)
+        k_x2 = plan.hold(0.0)
+        plan.to(-slow)
+        plan.to(-side)
+        plan.hold(c / design.v_corner)
+        plan.to(slow)
+        groups = [[k_x1, k_x2], [k_y]]
+    plan.to(cruise)
+    plan.hold(e / design.v)
+    return groups
+
+
+def _close(plan: _Plan, first: int, groups: Sequence[Sequence[int]], theta0: float,
+           p0: np.ndarray, target: np.ndarray) -> bool:
+    """Lengthen the holds of ``groups`` so that the segments from ``first`` end at ``target``.
+
+    A hold of a pure translation (ω = 0) at heading θ moves the base by h R(θ) u: the end point
+    is affine in the hold times, so two groups of holds in independent directions close the
+    loop exactly. Returns False if a hold would have to be negative.
+    """
+    _, pos, _ = _path(plan.segs[first:], theta0, p0, 0.005)
+    heading = theta0
+    dirs = {}
+    for j, (a, b, dur) in enumerate(plan.segs[first:], start=first):
+        c, s = math.cos(heading), math.sin(heading)
+        dirs[j] = np.array([c * a[0] - s * a[1], s * a[0] + c * a[1]])
+        heading += dur * (a[2] + b[2]) / 2
+    mat = np.stack([sum(dirs[j] for j in g) for g in groups], axis=1)
+    try:
+        h = np.linalg.solve(mat, target - pos[-1])
+    except np.linalg.LinAlgError:
+        return False
+    if np.any(h < -1e-9):
+        return False
+    for g, hj in zip(groups, h, strict=True):
+        for j in g:
+            plan.segs[j][2] += float(max(hj, 0.0))
+    return True
+
+
+def _lobe_plan(kind: str, size: tuple[float, float], design: _Design, caps: Limits,
+               pivots: np.ndarray | None, mirror: bool = False) -> _Plan | None:
+    plan = _Plan(caps, pivots)
+    plan.level = np.array([design.v, 0.0, 0.0])
+    groups = _lobe(plan, kind, size, design, mirror, first=False)
+    if not _close(plan, 0, groups, 0.0, np.zeros(2), np.zeros(2)):
+        return None
+    return plan
+
+
+def _fits(plan: _Plan | None, half: tuple[float, float]) -> bool:
+    """Does a lobe stay within |x| ≤ W, |y| ≤ H? Its variants are reflections of it (a drive
+    lobe has vy = 0, a crab lobe ω = 0), so they stay inside too."""
+    if plan is None:
+        return False
+    _, pos, _ = _path(plan.segs, 0.0, np.zeros(2), 0.02)
+    return bool(np.abs(pos[:, 0]).max() <= half[0] and np.abs(pos[:, 1]).max() <= half[1])
+
+
+def _bisect(ok: Callable[[float], bool], lo: float, hi: float, steps: int = 10) -> float | None:
+    """Largest value in [lo, hi] for which ``ok`` holds (assumed monotone), None if not at lo."""
+    if not ok(lo):
+        return None
+    if ok(hi):
+        return hi
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _fit_lobe(kind: str, design: _Design, caps: Limits, pivots: np.ndarray | None,
+              half: tuple[float, float]) -> tuple[float, float] | None:
+    """Sizes (e, c) [m] of the largest lobe of ``kind`` inside |x| ≤ W, |y| ≤ H."""
+    lo = None
+    for e0 in np.arange(0.0, 2 * half[0], 0.25):
+        if _fits(_lobe_plan(kind, (float(e0), 0.0), design, caps, pivots), half):
+            lo = float(e0)
+            break
+    if lo is None:
+        return None
+    e = _bisect(lambda e: _fits(_lobe_plan(kind, (e, 0.0), design, caps, pivots), half),
+                lo, 2 * half[0], steps=8)
+    assert e is not None
+    c = _bisect(lambda c: _fits(_lobe_plan(kind, (e, c), design, caps, pivots), half),
+                0.0, 2 * half[1], steps=8)
+    return (e, c if c is not None else 0.0)
+
+
+def _start_spin(plan: _Plan, design: _Design) -> None:
+    """Start: a whole clockwise rotation in place from rest (units set tangentially, as they
+    trail a rotation), then away along +x through a tight right arc, at cruise speed; heading
+    back to 0 (mod 2π). Clockwise, so that the original run turns both ways early on."""
+    rot = np.array([0.0, 0.0, -design.w_spin])
+    arc = np.array([design.v_spin, 0.0, -design.w_spin])
+    slow = np.array([design.v_spin, 0.0, 0.0])
+    t_rot = plan.blend_time(np.zeros(3), rot)
+    t_arc = plan.blend_time(rot, arc)
+    t_slow = plan.blend_time(arc, slow)
+    turned = design.w_spin * (t_rot / 2 + t_arc + t_slow / 2)
+    target = 2 * math.pi
+    while target < turned:
+        target += 2 * math.pi
+    plan.to(rot, t_rot)
+    plan.hold((target - turned) / design.w_spin)
+    plan.to(arc, t_arc)
+    plan.to(slow, t_slow)
+    plan.to(np.array([design.v, 0.0, 0.0]))
+    plan.theta = 0.0  # a whole number of turns: the world heading is back to +x
+
+
+def _typical_program(duration: float, caps: Limits, floor: Floor, pivots: np.ndarray | None,
+                     design: _Design, order: Sequence[tuple[str, bool]],
+                     shrink: float) -> list[list]:
+    """The program of a typical run (see :func:`typical`), exactly ``duration`` long."""
+    half = (shrink * min(floor[1], -floor[0]), shrink * min(floor[3], -floor[2]))
+    sizes = {kind: _fit_lobe(kind, design, caps, pivots, half) for kind in {k for k, _ in order}}
+    if any(v is None for v in sizes.values()):
+        raise PlanningError("the floor is too small for a typical run at these limits")
+
+    plan = _Plan(caps, pivots)
+    spin_start = duration >= SPIN_START_MIN
+    if spin_start:
+        _start_spin(plan, design)
+    lobe = 0
+    while plan.duration < duration + 10.0:
+        kind, mirror = order[lobe % len(order)]
+        first = len(plan.segs)
+        size = sizes[kind]
+        if lobe == 0:  # the start moved the base along +x already: shorten the first straight
+            if spin_start:
+                p0 = _path(plan.segs, 0.0, np.zeros(2), 0.005)[1][-1]
+                advance = float(p0[0])
+            else:
+                p0 = np.zeros(2)
+                advance = 0.5 * design.v * plan.blend_time(np.zeros(3), np.array([design.v, 0, 0]))
+            size = (max(size[0] - advance, 0.0), size[1])
+        else:
+            p0 = np.zeros(2)
+        groups = _lobe(plan, kind, size, design, mirror, first=lobe == 0 and not spin_start)
+        if not _close(plan, first, groups, 0.0, p0, np.zeros(2)):
+            raise PlanningError("the floor is too small for a typical run at these limits")
+        lobe += 1
+
+    # stop on the last straight (a translation hold) that leaves time to decelerate
+    starts = np.cumsum([0.0] + [s[2] for s in plan.segs])
+    for j in range(len(plan.segs) - 1, -1, -1):
+        a, b, dur = plan.segs[j]
+        if not (np.array_equal(a, b) and a[2] == 0.0 and np.linalg.norm(a[:2]) > 0):
+            continue
+        t_stop = plan.blend_time(a, np.zeros(3))
+        if starts[j] + t_stop <= duration and (dur > 0 or starts[j] + t_stop > duration - 1.0):
+            break
+    else:
+        need = min(starts[j] + plan.blend_time(a, np.zeros(3))
+                   for j, (a, b, _) in enumerate(plan.segs)
+                   if np.array_equal(a, b) and a[2] == 0.0 and np.linalg.norm(a[:2]) > 0)
+        raise PlanningError(f"duration {duration:g} s is too short for a typical run at these "
+                            f"limits; give at least {math.ceil(need * 10) / 10:g} s")
+    segs = [list(s) for s in plan.segs[:j + 1]]
+    segs[j][2] = min(dur, duration - t_stop - starts[j])
+    segs.append([a, np.zeros(3), t_stop])
+    total = sum(s[2] for s in segs)
+    k = duration / total  # ≥ 1: stretch time (speeds / k, accelerations / k²; same path)
+    return [[sa / k, sb / k, sd * k] for sa, sb, sd in segs]
+
+
+def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
+            w_max: float = 1.0, alpha_max: float = 1.0, floor: Sequence[float] = DEFAULT_FLOOR,
+            dt: float = 0.005, seed: int = 0, pivot_rate_max: float | None = 1.5,
+            platform: Platform | None = None) -> Trajectory:
+    """A "typical" identification run (thesis Sec. VI-A), from rest to rest.
+
+    The run is a chain of loops ("lobes") through the start, each leaving and reaching it along
+    +x at cruise speed: the lobes of the upper half of the floor turn left, the mirrored ones of
+    the lower half turn right. Lobe kinds, in turn:
+
+    * drive — straights at cruise speed (constant-velocity phases), slowing down into the four
+      corners (acceleration phases); the first corner includes a whole rotation in place;
+    * crab — the same loop at constant heading (the ropod is holonomic): the short sides driven
+      sideways (vy), the long side backwards with a stop-and-go.
+
+    Runs of 30 s or more start with a whole clockwise rotation in place and a right arc. A 60 s
+    run holds the start, a left drive lobe and most of a crab lobe; the right corners of the
+    drive lobes follow in longer runs — and in the mirrored variant, which swaps them.
+
+    The order is drive-left, drive-right, crab, crab-mirrored, and again. Every change of the
+    twist is a minimum-jerk blend (10τ³ − 15τ⁴ + 6τ⁵) between constant levels, so the
+    acceleration is continuous (jumps in it bias the identification); each blend is as short as
+    the limits allow at 90 % of their value (pivot rates: 80 %, quasi-steady). The lobes are
+    sized to the floor and closed exactly by solving for the length of two straights.
+
+    Wheel flips (Sec. VI-A) are planned out: no blend reverses the velocity of a pivot, a stop is
+    followed by motion in the same direction, and the direction of every pivot velocity turns no
+    faster than the pivot-rate limit. The pivot rates predicted by integration
+    (:func:`predict_pivots`) are then checked for all four variants, and so is the floor.
+
+    Parameters
+    ----------
+    duration : length of the run [s] (≥ about 10 s); the program is cut on a straight, ends with
+        a stop and is stretched in time (slower, same path) to last exactly this long.
+    v_max, a_max, w_max, alpha_max : limits [m/s, m/s², rad/s, rad/s²] (see :class:`Limits`)
+    floor : (x_min, x_max, y_min, y_max) [m], the rectangle the base origin must stay in, in
+        the world frame of the planned pose (start at the origin, heading +x). Default: 6 m × 4 m
+        centred on the start. The run uses the largest rectangle centred on the start inside it;
+        shrink the floor by the robot's half size yourself.
+    dt : sample interval of the setpoints [s]
+    seed : 0 for the reference run; other seeds vary the speeds (±10 %) and the lobe order,
+        repeatably.
+    pivot_rate_max : pivot-rate limit [rad/s] (Sec. VII-C: 1.5); None to not plan for it
+    platform : geometry for the pivot rates; default the ropod (:func:`ropod_platform`)
+
+    Returns
+    -------
+    Trajectory
+        Setpoints at ``dt`` and the planned pose.
+    """
+    limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max)
+    floor = _check_floor(floor)
+    if not (isinstance(duration, int | float) and 0 < duration <= TYPICAL_MAX_DURATION):
+        raise InputError(f"duration must be a number of seconds in (0, "
+                         f"{TYPICAL_MAX_DURATION:g}], got {duration!r}")
+    if not (isinstance(dt, int | float) and 0 < dt <= 0.1):
+        raise InputError(f"dt must be in (0, 0.1] s, got {dt!r}")
+    if platform is None:
+        platform = ropod_platform()
+    pivots = platform.pivots if pivot_rate_max is not None else None
+    rng = np.random.default_rng(seed)
+    jitter = 1.0 if seed == 0 else float(rng.uniform(0.9, 1.1))
+    order = list(LOBES)
+    if seed != 0:
+        order = [order[i] for i in rng.permutation(len(order))]
+        k = next(i for i, (kind, _) in enumerate(order) if kind == "drive")
+        order = order[k:] + order[:k]  # a drive lobe first: it absorbs the start's offset
+    pivot_margin = PIVOT_DESIGN_MARGIN
+    shrink = 0.97
+    speed = 1.0
+    last_error = ""
+    for _attempt in range(10):
+        caps = limits.scaled(DESIGN_MARGIN, pivot_margin)
+        v = min(0.8 * jitter, 0.85) * v_max * speed
+        v_corner = min(0.4 * v_max * jitter, 0.9 * caps.a_max / (0.9 * caps.w_max)) * speed
+        design = _Design(
+            v=v, v_corner=v_corner, v_spin=0.2 * v_max * speed,
+            w_corner=min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner),
+            w_spin=0.9 * caps.w_max, pause=1.0)
+        try:
+            segs = _typical_program(duration, caps, floor, pivots, design, order, shrink)
+        except PlanningError as exc:
+            if "duration" in str(exc):
+                raise
+            speed *= 0.85  # smaller corners
+            last_error = str(exc)
+            continue
+        n = int(round(duration / dt))
+        t = np.arange(n + 1) * dt
+        if t[-1] < duration - 1e-9:
+            t = np.append(t, duration)
+        tw = _sample(segs, t)
+        traj = Trajectory.from_twist(t, tw[:, 0], tw[:, 1], tw[:, 2])
+        var = variants(traj)
+        if _off_floor(var, floor) is not None:
+            shrink *= 0.93
+            last_error = "the planned run leaves the floor"
+            continue
+        if pivot_rate_max is not None:
+            pred = predict_pivots(traj.t, np.stack([vt.twist() for vt in var.values()]),
+                                  platform)
+            peak = float(np.abs(pred.rate).max())
+            if peak > pivot_rate_max * 0.95 or pred.pulling.any():
+                pivot_margin *= 0.8
+                last_error = f"predicted pivot rate {peak:.2f} rad/s exceeds the limit"
+                continue
+        return traj
+    raise PlanningError(f"cannot plan a typical run within the limits: {last_error}; relax "
+                        "the limits, enlarge the floor or use no pivot-rate limit")
