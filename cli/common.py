@@ -37,12 +37,15 @@ def reports_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except InputError as exc:
-            fail(str(exc))
+            message = str(exc)
         except MemoryError:
-            fail("out of memory; use fewer or shorter logs, or a machine with more memory")
+            message = "out of memory; use fewer or shorter logs, or a machine with more memory"
         except KeyboardInterrupt:
             click.echo("interrupted", err=True)
             sys.exit(130)
+        # outside the handler: the exception's traceback (and the readers and open files its
+        # frames hold) is released before the exit, not kept alive until interpreter shutdown
+        fail(message)
 
     return wrapper  # type: ignore[return-value]
 
