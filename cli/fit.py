@@ -193,7 +193,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         # the report module (and matplotlib) only when needed: keeps a plain fit quick
         from ropod_sysid.report import read_comparison, write_fit_report
 
-        compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
+        compare, compare_label = read_comparison(compare_path, None, platform)
     # with --report, the fit's pass also gathers what the report draws: no second reading
     result = fit_files(list(logs), platform, options, workers=workers,
                        dask_address=dask_address, quiet=quiet, plots=report_path is not None)

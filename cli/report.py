@@ -53,7 +53,7 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     # a fit's parameter file, or a flat name → value mapping (a simulation's truth)
-    compare, compare_label = read_comparison(compare_path, None, platform.unit_names)
+    compare, compare_label = read_comparison(compare_path, None, platform)
     file_span, _, row_step = fit_settings(pfile, params_path)
     validation = pieces_of(validate_paths, platform, split_gaps, span or file_span, row_step)
     # each log streamed once: triangles and what the report draws

@@ -60,8 +60,12 @@ from ropod_sysid.trajectory import read_trajectory_csv
               help="Wheel speed loop integral gain [N m/rad].")
 @click.option("--torque-limit", default=Controller.torque_limit, show_default=True,
               help="Wheel torque limit [N m].")
-@click.option("--initial-pivots", type=click.Choice(["auto", "zero"]), default="auto",
-              show_default=True, help="auto: units trail the first motion; zero: all along x.")
+@click.option("--initial-angles", "initial_angles", type=click.Choice(["auto", "zero"]),
+              default="auto", show_default=True,
+              help="Unit angles at rest. auto: units that turn (swivel pivots) trail the "
+                   "first motion; zero: all along the base x axis.")
+@click.option("--initial-pivots", "initial_angles", type=click.Choice(["auto", "zero"]),
+              hidden=True, help="Old name of --initial-angles.")
 @quiet_option
 @reports_errors
 @writes(outputs={"out_path": "--out"},
@@ -70,7 +74,7 @@ from ropod_sysid.trajectory import read_trajectory_csv
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
             dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
             seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
-            initial_pivots: str, quiet: bool) -> None:
+            initial_angles: str, quiet: bool) -> None:
     """Simulate a run of the platform under a velocity controller and write its log."""
     if not out_path.lower().endswith(LOG_SUFFIXES):
         raise InputError(f"--out {out_path}: use a .csv or .mcap file name")
@@ -81,8 +85,8 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
         raise InputError(f"--seed {seed}: seeds the current noise and timestamp jitter, and "
                          "neither is on; give --current-noise or --jitter, or leave out --seed")
     platform = load_platform(platform_path)
-    values = read_truth_parameters(params_path, platform.unit_names)
-    params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
+    values = read_truth_parameters(params_path, platform)
+    params = DynamicParameters.from_mapping(values, platform, params_path)
     params.check_physical(params_path)
     setpoints = read_trajectory_csv(traj_path).to_setpoints()
     force = None
@@ -90,8 +94,9 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
         fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])
         force = ForceSchedule(fc["t"], np.column_stack([fc["F_bx"], fc["F_by"], fc["T_bz"]]))
     (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt, controller=controller,
-                         sensors=sensors, force=force, initial_delta=initial_pivots if
-                         initial_pivots == "auto" else None, quiet=quiet, source=out_path)
+                         sensors=sensors, force=force,
+                         initial="auto" if initial_angles == "auto" else None, quiet=quiet,
+                         source=out_path)
     if not np.all(np.isfinite(result.q)):
         raise InputError(f"{traj_path}: the simulation diverged; lower the setpoints or raise "
                          "--torque-limit")

@@ -222,7 +222,7 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
     if params_path is not None:
         from ropod_sysid.io.paramfile import read_truth_parameters
 
-        params = read_truth_parameters(params_path, platform.unit_names)
+        params = read_truth_parameters(params_path, platform)
     fl = _floor(floor)
     report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
     if plot_path is not None:

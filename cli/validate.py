@@ -46,7 +46,7 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: S
     platform = load_platform(platform_path)
     pfile = read_parameter_file(params_path)
     _, values = parameters_of(pfile, platform, params_path)
-    params = DynamicParameters.from_mapping(values, platform.unit_names, params_path)
+    params = DynamicParameters.from_mapping(values, platform, params_path)
     file_span, delay, row_step = fit_settings(pfile, params_path)  # as the fit was made
     sp = span if span is not None else file_span
     results = validate_sources(list(logs), platform, params, sp, delay, workers=workers,

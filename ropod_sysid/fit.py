@@ -21,7 +21,17 @@ from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import DynamicParameters, Friction, kind_of, parameter_names
+from ropod_sysid.model.units import FRICTION_VARIANTS
+from ropod_sysid.params import (
+    DISSIPATIVE_SIGN,
+    DynamicParameters,
+    Friction,
+    friction_names,
+    friction_of,
+    is_inertial,
+    kind_of,
+    parameter_names,
+)
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles, usable_pieces
 from ropod_sysid.solve import (
@@ -113,8 +123,7 @@ class FitResult:
         """The values the fit reports (the physically consistent ones if made) as a model's
         parameters, e.g. to validate them on other logs."""
         shown = self.physical.values if self.physical is not None else self.solution.values
-        return DynamicParameters.from_vector(shown, self.platform.unit_names,
-                                             self.options.friction)
+        return DynamicParameters.from_vector(shown, self.solution.names)
 
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (``docs/file-formats.md``), with the fit's account in
@@ -208,12 +217,15 @@ def parameters_of(pfile: ParameterFile, platform: Platform, where: str,
                          f"platform file describes '{platform.name}'; give the matching files")
     values = pfile.values()
     declared = pfile.extras.get("friction")
-    if declared is not None and declared not in ("per-wheel", "shared"):
-        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel or shared")
+    if declared is not None and declared not in FRICTION_VARIANTS:
+        raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel, shared or "
+                         "body")
+    shared = friction_names(platform, "shared")
     friction: Friction = declared or (  # type: ignore[assignment]
-        "shared" if any(k in values for k in ("fwv", "fwc", "fpv", "fpc")) else "per-wheel")
+        "body" if friction_of(values) == "body" else
+        "shared" if any(k in values for k in shared) else "per-wheel")
     units = platform.unit_names
-    names = parameter_names(units, friction)
+    names = parameter_names(platform, friction)
     unknown = [k for k in values if k not in names]
     if unknown:
         raise InputError(
@@ -234,14 +246,15 @@ def parameters_of(pfile: ParameterFile, platform: Platform, where: str,
 
 def physical_bounds(names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of a physically consistent fit: masses and inertias ≥ 0; friction dissipative
-    (roll friction ≤ 0 since it is added to the wheel torque, pivot friction ≥ 0; see params)."""
+    (friction added to a motor torque ≤ 0, the swivel's pivot friction ≥ 0; each type's
+    ``friction_signs``, see :mod:`ropod_sysid.params`)."""
     lo = np.full(len(names), -np.inf)
     hi = np.full(len(names), np.inf)
     for j, name in enumerate(names):
-        kind = kind_of(name)
-        if kind in ("m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w", "fpv", "fpc"):
+        sign = DISSIPATIVE_SIGN.get(kind_of(name))
+        if is_inertial(name) or sign == 1:
             lo[j] = 0.0
-        elif kind in ("fwv", "fwc"):
+        elif sign == -1:
             hi[j] = 0.0
     return lo, hi
 

@@ -1,7 +1,7 @@
 """Steps 1–2 of the chunked pass (:mod:`ropod_sysid.stream`): unwrapping and the sample grid.
 
-Chunk by chunk, the pivot angles (and a tracker heading) are unwrapped, continued across chunks
-(bit-identical to one :func:`numpy.unwrap`); the sample time is taken from the head of the log
+Chunk by chunk, the wrapped unit angles (pivots; and a tracker heading) are unwrapped, continued
+across chunks (bit-identical to one :func:`numpy.unwrap`); the sample time is taken from the head of the log
 (:func:`ropod_sysid.regressor.grid_step`). A log whose steps all stay on it is passed on as
 sampled; a jittered one is put on the uniform grid ``t0 + k dt`` by linear interpolation
 continued across chunks — the grid of the in-memory path. A step off the grid found after the
@@ -29,13 +29,12 @@ class _OffGrid(Exception):
 
 @dataclass
 class _Samples:
-    """Consecutive grid samples: t (m,), delta (m, n), phi (m, n, 2), current (m, n, 2),
-    pose (m, 3) or None."""
+    """Consecutive grid samples: t (m,), angles (m, J) (wrapped ones unwrapped), currents
+    (m, A), pose (m, 3) or None."""
 
     t: np.ndarray
-    delta: np.ndarray
-    phi: np.ndarray
-    current: np.ndarray
+    angles: np.ndarray
+    currents: np.ndarray
     pose: np.ndarray | None
 
     def __len__(self) -> int:
@@ -43,8 +42,8 @@ class _Samples:
 
     def take(self, start: int, stop: int) -> _Samples:
         pose = None if self.pose is None else self.pose[start:stop]
-        return _Samples(self.t[start:stop], self.delta[start:stop], self.phi[start:stop],
-                        self.current[start:stop], pose)
+        return _Samples(self.t[start:stop], self.angles[start:stop],
+                        self.currents[start:stop], pose)
 
     @staticmethod
     def join(parts: list[_Samples]) -> _Samples:
@@ -52,9 +51,8 @@ class _Samples:
             return parts[0]
         pose = None if parts[0].pose is None else np.concatenate([p.pose for p in parts])
         return _Samples(np.concatenate([p.t for p in parts]),
-                        np.concatenate([p.delta for p in parts]),
-                        np.concatenate([p.phi for p in parts]),
-                        np.concatenate([p.current for p in parts]), pose)
+                        np.concatenate([p.angles for p in parts]),
+                        np.concatenate([p.currents for p in parts]), pose)
 
 
 class _Sink(Protocol):
@@ -79,7 +77,7 @@ class _Grid:
         self.next_k = 0  # next grid index to emit (resampling)
         self.max_step = -np.inf
         self.min_step = np.inf
-        self.unwrap_delta: _Unwrap | None = None
+        self.unwrap_angles: _Unwrap | None = None
         self.unwrap_theta: _Unwrap | None = None
         self.unwrap_grid: _Unwrap | None = None
         self.has_pose: bool | None = None
@@ -92,13 +90,17 @@ class _Grid:
         elif self.has_pose != (log.pose is not None):
             raise InputError(f"{self.source}: the tracker pose is given on part of the log "
                              "only; give x_b, y_b, theta_b on every sample or on none")
-        delta, self.unwrap_delta = _unwrap(log.delta, self.unwrap_delta)
+        wrapped = log.layout.wrapped
+        angles = np.asarray(log.angles, float)
+        if wrapped.any():
+            angles = angles.copy()
+            angles[:, wrapped], self.unwrap_angles = _unwrap(angles[:, wrapped],
+                                                            self.unwrap_angles)
         pose = None
         if log.pose is not None:
             theta, self.unwrap_theta = _unwrap(log.pose[:, 2], self.unwrap_theta)
             pose = np.column_stack([log.pose[:, :2], theta])
-        raw = _Samples(np.asarray(log.t, float), delta, np.asarray(log.phi, float),
-                       np.asarray(log.current, float), pose)
+        raw = _Samples(np.asarray(log.t, float), angles, np.asarray(log.currents, float), pose)
         if self.dt is None:
             self.head.append(raw)
             if sum(len(h) for h in self.head) > GRID_STEPS:
@@ -158,7 +160,7 @@ class _Grid:
         if src.pose is not None:
             pose = at(src.pose)
             pose[:, 2], self.unwrap_grid = _unwrap(pose[:, 2], self.unwrap_grid)
-        self.sink.push(_Samples(tk, at(src.delta), at(src.phi), at(src.current), pose))
+        self.sink.push(_Samples(tk, at(src.angles), at(src.currents), pose))
         self.next_k += tk.size
 
     def finish(self) -> list[str]:

@@ -21,7 +21,8 @@ from scipy.ndimage import uniform_filter1d
 
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import GAP_RULE, check_times
-from ropod_sysid.odometry import base_twist
+from ropod_sysid.model import PlatformModel
+from ropod_sysid.odometry import base_twist, unwrap_angles
 from ropod_sysid.platform import Platform
 
 _DROPPED = re.compile(r"dropped (\d+) of \d+ smart-wheel frames")
@@ -106,11 +107,12 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     names = ("vx", "vy", "omega")
     vel_ranges = {k: ((float(np.percentile(vel[:, j], 1)), float(np.percentile(vel[:, j], 99)))
                       if vel.shape[0] else (0.0, 0.0)) for j, k in enumerate(names)}
-    coverage = {}
-    for i, u in enumerate(log.units):
-        wrapped = np.mod(log.delta[:, i], 2 * np.pi)
+    coverage = {}  # per unit with a turning joint (a wrapped angle: a swivel's pivot)
+    lay = log.layout
+    for j in np.flatnonzero(lay.wrapped):
+        wrapped = np.mod(log.angles[:, j], 2 * np.pi)
         bins = np.unique(np.floor(wrapped / (2 * np.pi) * 36).astype(int))
-        coverage[u] = 10.0 * float(bins.size)
+        coverage[lay.units[lay.angle_unit[j]]] = 10.0 * float(bins.size)
 
     reasons = []
     short = motion_shortfall(moving_time, "of motion", c)
@@ -169,14 +171,12 @@ def _base_velocity(log: Log, platform: Platform, t: np.ndarray, dt_med: float,
     spent moving [s]."""
     if t.size < 3:
         return np.zeros((0, 3)), 0.0
-    delta = np.unwrap(log.delta, axis=0)
-    d_rate = np.gradient(delta, t, axis=0)
-    p_rate = np.gradient(log.phi, t, axis=0)
+    angles, _ = unwrap_angles(platform.layout.wrapped, log.angles)
+    rates = np.gradient(angles, t, axis=0)
     w = max(1, int(round(0.05 / dt_med))) if dt_med > 0 else 1
     if w > 1:
-        d_rate = uniform_filter1d(d_rate, w, axis=0, mode="nearest")
-        p_rate = uniform_filter1d(p_rate, w, axis=0, mode="nearest")
-    vel = base_twist(platform, delta, d_rate, p_rate)
+        rates = uniform_filter1d(rates, w, axis=0, mode="nearest")
+    vel = base_twist(PlatformModel(platform), angles, rates)
     moving = (np.hypot(vel[:, 0], vel[:, 1]) > c.moving_speed) | \
         (np.abs(vel[:, 2]) > c.moving_turn)
     widths = np.gradient(t)        # each sample's share of the time axis
@@ -211,8 +211,9 @@ def format_inspection(ins: Inspection) -> str:
         "velocity   " + ", ".join(f"{k} [{lo:.3g}, {hi:.3g}]"
                                   for k, (lo, hi) in ins.velocity_ranges.items())
         + "  (1st–99th percentile, base frame)",
-        "pivots     " + ", ".join(f"{u}: {deg:.0f}°" for u, deg in ins.pivot_coverage.items())
-        + "  of the circle visited",
+        *(["pivots     " + ", ".join(f"{u}: {deg:.0f}°"
+                                     for u, deg in ins.pivot_coverage.items())
+           + "  of the circle visited"] if ins.pivot_coverage else []),
         "ranges",
     ]
     width = max((len(k) for k in ins.ranges), default=0)

@@ -7,9 +7,9 @@ line that names the file and the key.
 
 from __future__ import annotations
 
-import math
-import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -17,63 +17,101 @@ import numpy as np
 import yaml
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.model.units import UNIT_TYPES, Channel
+from ropod_sysid.model.units.entry import UNIT_NAME as UNIT_NAME
+from ropod_sysid.model.units.entry import number
+from ropod_sysid.model.units.swivel import SwivelSpec
 from ropod_sysid.yamlload import safe_load
 
-UNIT_NAME = re.compile(r"^[A-Za-z0-9_]+$")
-UNIT_TYPES = ("swivel",)
+UnitSpec = SwivelSpec  # the default unit type's entry (``type: swivel``)
+TOP_LEVEL_TEXT = {"wheel_radius": "the wheel radius R_w in metres",
+                  "wheel_distance": "the distance d_w between the two wheels of a unit in metres",
+                  "torque_constant": "k_t in N m/A",
+                  "friction_tanh_gain": "alpha in s/rad"}
 
 
 @dataclass(frozen=True)
-class UnitSpec:
-    """One wheel unit as the platform file describes it.
+class Group:
+    """Units of one type sharing their geometry: the type, its specs, their indices among the
+    platform's units, and the indices of their angle and current channels in the log."""
 
-    Attributes
-    ----------
-    name : str
-        Unit name used in log columns (``delta_<name>``, ``phi_<name>L`` …).
-    pivot : tuple[float, float]
-        Attachment point r_ib/b^b in the base frame [m] (Table I, in metres).
-    type : str
-        Unit model; ``"swivel"`` is the smart wheel of the thesis.
-    left_motor : int
-        For the smart-wheel data layout: which motor (1 or 2) drives the left wheel.
-    sign_left, sign_right : int
-        Sign of each motor's encoder and current relative to the log's conventions (+1 or -1).
-    pivot_offset : float
-        Pivot encoder calibration [rad], subtracted from the raw pivot angle.
-    """
+    type: Any  # the unit-type class (:mod:`ropod_sysid.model.units`)
+    specs: tuple[Any, ...]
+    units: np.ndarray  # (k,) unit indices
+    angles: np.ndarray  # (k·a,) angle channel indices
+    currents: np.ndarray  # (k·m,) current channel indices
 
-    name: str
-    pivot: tuple[float, float]
-    type: str = "swivel"
-    left_motor: int = 1
-    sign_left: int = 1
-    sign_right: int = 1
-    pivot_offset: float = 0.0
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in self.specs]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The log channels of a platform: per unit in platform order, its type's angle channels,
+    then (separately) its current channels (``docs/file-formats.md``)."""
+
+    units: tuple[str, ...]
+    angle_names: tuple[str, ...]
+    current_names: tuple[str, ...]
+    wrapped: np.ndarray  # (J,) bool: angle channels to unwrap
+    angle_channels: tuple[Channel, ...]
+    current_channels: tuple[Channel, ...]
+    angle_unit: np.ndarray  # (J,) index of the unit of each angle channel
+    current_unit: np.ndarray  # (A,) index of the unit of each current channel
+
+    @property
+    def n_angles(self) -> int:
+        return len(self.angle_names)
+
+    @property
+    def n_currents(self) -> int:
+        return len(self.current_names)
+
+    def columns(self) -> list[str]:
+        """The CSV columns after ``t``: per unit its angles, then its currents."""
+        return [name for name, _, _ in self._order]
+
+    @property
+    def fields(self) -> list[tuple[str, str]]:
+        """(unit, field) of each column of :meth:`columns`: the keys of a JSON MCAP message."""
+        return [(self.units[i], ch.field) for _, i, ch in self._order]
+
+    @cached_property
+    def _order(self) -> list[tuple[str, int, Channel]]:
+        out = []
+        for i in range(len(self.units)):
+            out += [(n, i, c) for n, u, c in zip(self.angle_names, self.angle_unit,
+                                                 self.angle_channels, strict=True) if u == i]
+            out += [(n, i, c) for n, u, c in zip(self.current_names, self.current_unit,
+                                                 self.current_channels, strict=True) if u == i]
+        return out
+
+    def split(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Values (N, F) in :meth:`columns` order → (angles (N, J), currents (N, A)),
+        contiguous."""
+        index = {name: k for k, name in enumerate(self.columns())}
+        return (np.ascontiguousarray(values[:, [index[c] for c in self.angle_names]]),
+                np.ascontiguousarray(values[:, [index[c] for c in self.current_names]]))
 
 
 @dataclass(frozen=True)
 class Platform:
-    """Geometry of a swivel-wheeled platform (thesis Appendix A, in SI units).
+    """A base with its wheel units (thesis Appendix A, in SI units).
 
     Attributes
     ----------
-    wheel_radius : float      R_w [m]
-    wheel_distance : float    d_w [m], between the two wheels of a unit
-    caster_offset : float     s_w [m], pivot axis to wheel axle
-    hub_com_offset : float    Δx [m], kinematic centre to unit centre of mass
-    torque_constant : float   k_t [N m/A]
+    name : str
     friction_tanh_gain : float  α in tanh(α·rate) of the Coulomb friction terms [s/rad]
+    units : the unit entries, one spec per unit (:mod:`ropod_sysid.model.units`)
+    settings : the platform-wide keys of the file (``wheel_radius``, ``torque_constant`` …)
+        that unit entries inherit unless they override them
     """
 
     name: str
-    wheel_radius: float
-    wheel_distance: float
-    caster_offset: float
-    hub_com_offset: float
-    torque_constant: float
     friction_tanh_gain: float
-    units: tuple[UnitSpec, ...]
+    units: tuple[Any, ...]
+    settings: dict[str, float] = field(default_factory=dict, compare=False)
     source: str = field(default="<memory>", compare=False)
 
     @property
@@ -85,53 +123,107 @@ class Platform:
         return [u.name for u in self.units]
 
     @property
-    def pivots(self) -> np.ndarray:
-        """Attachment points r_ib/b^b, shape (n, 2) [m]."""
-        return np.array([u.pivot for u in self.units], dtype=float).reshape(-1, 2)
+    def types(self) -> list[str]:
+        """The unit types present, in order of first appearance."""
+        return list(dict.fromkeys(u.type for u in self.units))
 
     @property
-    def s_cm(self) -> float:
-        """Pivot axis to hub centre of mass, s_cm = s_w − Δx [m] (below eq. 9)."""
-        return self.caster_offset - self.hub_com_offset
+    def positions(self) -> np.ndarray:
+        """Attachment points of the units in the base frame, shape (n, 2) [m]."""
+        return np.array([u.position for u in self.units], dtype=float).reshape(-1, 2)
 
-    def with_pivots(self, pivots: np.ndarray) -> Platform:
+    def with_positions(self, positions: np.ndarray) -> Platform:
         """A copy with the attachment points replaced (same unit names and settings)."""
-        pivots = np.asarray(pivots, dtype=float)
-        units = tuple(
-            UnitSpec(u.name, (float(p[0]), float(p[1])), u.type, u.left_motor, u.sign_left,
-                     u.sign_right, u.pivot_offset)
-            for u, p in zip(self.units, pivots, strict=True)
-        )
-        return Platform(self.name, self.wheel_radius, self.wheel_distance, self.caster_offset,
-                        self.hub_com_offset, self.torque_constant, self.friction_tanh_gain,
-                        units, self.source)
+        units = tuple(u.moved(p) for u, p in zip(self.units, np.asarray(positions, float),
+                                                 strict=True))
+        return Platform(self.name, self.friction_tanh_gain, units, dict(self.settings),
+                        self.source)
+
+    @cached_property
+    def layout(self) -> Layout:
+        """The platform's log channels."""
+        a_names, c_names, a_ch, c_ch, a_u, c_u = [], [], [], [], [], []
+        for i, u in enumerate(self.units):
+            cls = UNIT_TYPES[u.type]
+            for ch in cls.angles:
+                a_names.append(ch.column(u.name))
+                a_ch.append(ch)
+                a_u.append(i)
+            for ch in cls.currents:
+                c_names.append(ch.column(u.name))
+                c_ch.append(ch)
+                c_u.append(i)
+        return Layout(tuple(self.unit_names), tuple(a_names), tuple(c_names),
+                      np.array([c.wrapped for c in a_ch], bool), tuple(a_ch), tuple(c_ch),
+                      np.array(a_u, int), np.array(c_u, int))
+
+    @cached_property
+    def groups(self) -> tuple[Group, ...]:
+        """The units grouped by type and shared geometry, types in order of appearance."""
+        lay = self.layout
+        keyed: dict[tuple[str, Any], list[int]] = {}
+        for i, u in enumerate(self.units):
+            keyed.setdefault((u.type, UNIT_TYPES[u.type].group_key(u)), []).append(i)
+        order = {t: k for k, t in enumerate(self.types)}
+        out = []
+        for (utype, _), idx in sorted(keyed.items(), key=lambda kv: order[kv[0][0]]):
+            cls = UNIT_TYPES[utype]
+            units = np.array(idx, int)
+            out.append(Group(cls, tuple(self.units[i] for i in idx), units,
+                             np.flatnonzero(np.isin(lay.angle_unit, units)),
+                             np.flatnonzero(np.isin(lay.current_unit, units))))
+        return tuple(out)
+
+    def columns_text(self) -> str:
+        """The log columns the platform needs, in words: ``t, delta_u, phi_uL, … for units
+        1, 2`` (per unit type for a mixed platform)."""
+        parts = []
+        for t in self.types:
+            cls = UNIT_TYPES[t]
+            cols = ", ".join(c.template.replace("{u}", "u") for c in (*cls.angles, *cls.currents))
+            units = ", ".join(u.name for u in self.units if u.type == t)
+            parts.append(f"{cols} for unit{'s' if ',' in units else ''} {units}")
+        if len(parts) == 1:
+            return "t, " + parts[0]
+        return "t and " + "; ".join(parts)
+
+    def unit_of_column(self, name: str) -> str | None:
+        """The unit name a column of one of the platform's types would belong to
+        (``phi_7L`` → ``7``), or None."""
+        import re
+
+        templates = sorted({c.template for t in self.types
+                            for c in (*UNIT_TYPES[t].angles, *UNIT_TYPES[t].currents)},
+                           key=lambda tpl: -len(tpl))
+        for tpl in templates:
+            head, tail = tpl.split("{u}")
+            m = re.fullmatch(re.escape(head) + r"(\w+?)" + re.escape(tail), name)
+            if m:
+                return m.group(1)
+        return None
+
+    def torque_constants(self) -> np.ndarray:
+        """Torque per current of every current channel (A,) [N m/A]."""
+        out = np.empty(self.layout.n_currents)
+        for g in self.groups:
+            out[g.currents] = g.type.from_specs(g.specs, self.friction_tanh_gain
+                                                ).torque_constants()
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         """The platform as the YAML mapping of the platform file (``docs/file-formats.md``)."""
+        out: dict[str, Any] = {"name": self.name}
+        out.update(self.settings)
+        out["friction_tanh_gain"] = self.friction_tanh_gain
         units = []
         for u in self.units:
-            d: dict[str, Any] = {"name": u.name, "pivot": [u.pivot[0], u.pivot[1]]}
+            d = u.to_entry(self.settings)
             if u.type != "swivel":
-                d["type"] = u.type
-            if u.left_motor != 1:
-                d["left_motor"] = u.left_motor
-            if u.sign_left != 1:
-                d["sign_left"] = u.sign_left
-            if u.sign_right != 1:
-                d["sign_right"] = u.sign_right
-            if u.pivot_offset != 0.0:
-                d["pivot_offset"] = u.pivot_offset
+                d = {"name": d.pop("name"), "type": u.type} | {k: v for k, v in d.items()
+                                                                 if k != "type"}
             units.append(d)
-        return {
-            "name": self.name,
-            "wheel_radius": self.wheel_radius,
-            "wheel_distance": self.wheel_distance,
-            "caster_offset": self.caster_offset,
-            "hub_com_offset": self.hub_com_offset,
-            "torque_constant": self.torque_constant,
-            "friction_tanh_gain": self.friction_tanh_gain,
-            "units": units,
-        }
+        out["units"] = units
+        return out
 
 
 def ropod_platform() -> Platform:
@@ -156,102 +248,64 @@ def ropod_platform() -> Platform:
     )
 
 
-def _number(data: dict[str, Any], key: str, where: str, default: float | None = None) -> float:
-    if key not in data:
-        if default is not None:
-            return default
-        raise InputError(f"{where}: missing key '{key}'; add it (SI units, see "
-                         "docs/file-formats.md)")
-    value = data[key]
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{where}: key '{key}' must be a number, got {value!r}; write a plain "
-                         "number in SI units (e.g. 0.05 or 5e-2)")
-    if not math.isfinite(float(value)):
-        raise InputError(f"{where}: key '{key}' must be finite, got {value!r}; give its value "
-                         "in SI units")
-    return float(value)
+def _settings(data: dict[str, Any], where: str) -> dict[str, float]:
+    """The platform-wide keys of the unit types, checked (numbers; positive where needed)."""
+    keys: list[str] = []
+    for cls in UNIT_TYPES.values():
+        keys += [k for k in cls.platform_keys if k not in keys]
+    out = {}
+    for key in keys:
+        if key in data:
+            out[key] = number(data, key, where)
+            if key in TOP_LEVEL_TEXT and out[key] <= 0:
+                raise InputError(f"{where}: '{key}' must be > 0, got {out[key]}; give "
+                                 f"{TOP_LEVEL_TEXT[key]}")
+    return out
 
 
-def _unit(entry: Any, k: int, where: str) -> UnitSpec:
-    key = f"units[{k}]"
-    if not isinstance(entry, dict):
-        raise InputError(f"{where}: '{key}' must be a mapping like {{name: \"1\", pivot: [x, y]}}")
-    if "name" not in entry:
-        raise InputError(f"{where}: '{key}' has no 'name'; give every unit a name")
-    name = str(entry["name"])
-    if not UNIT_NAME.match(name):
-        raise InputError(
-            f"{where}: '{key}.name' is {name!r}; use letters, digits and underscores only"
-        )
-    pivot = entry.get("pivot")
-    if (
-        not isinstance(pivot, list | tuple)
-        or len(pivot) != 2
-        or not all(isinstance(p, int | float) and not isinstance(p, bool) for p in pivot)
-        or not all(math.isfinite(float(p)) for p in pivot)
-    ):
-        raise InputError(f"{where}: '{key}.pivot' must be two finite numbers [x, y] in metres")
-    utype = str(entry.get("type", "swivel"))
+def _unit_type(entry: Any, k: int, where: str) -> Any:
+    utype = str(entry.get("type", "swivel")) if isinstance(entry, dict) else "swivel"
     if utype not in UNIT_TYPES:
         raise InputError(
-            f"{where}: '{key}.type' is {utype!r}; known unit types: {', '.join(UNIT_TYPES)} — "
-            "use one of them (or leave 'type' out for swivel)"
-        )
-    left_motor = entry.get("left_motor", 1)
-    if left_motor not in (1, 2):
-        raise InputError(f"{where}: '{key}.left_motor' must be 1 or 2, got {left_motor!r}")
-    signs = []
-    for s in ("sign_left", "sign_right"):
-        v = entry.get(s, 1)
-        if v not in (1, -1):
-            raise InputError(f"{where}: '{key}.{s}' must be 1 or -1, got {v!r}")
-        signs.append(int(v))
-    offset = _number(entry, "pivot_offset", f"{where}: '{key}'", 0.0) if "pivot_offset" in entry \
-        else 0.0
-    return UnitSpec(name, (float(pivot[0]), float(pivot[1])), utype, int(left_motor),
-                    signs[0], signs[1], offset)
+            f"{where}: 'units[{k}].type' is {utype!r}; known unit types: "
+            f"{', '.join(UNIT_TYPES)} — use one of them (or leave 'type' out for swivel)")
+    return UNIT_TYPES[utype]
 
 
-def platform_from_dict(data: Any, where: str = "<platform>") -> Platform:
+def platform_from_dict(data: Any, where: str = "<platform>", min_units: int = 2) -> Platform:
     """Validate a platform mapping (the parsed YAML) and build a :class:`Platform`."""
     if not isinstance(data, dict):
         raise InputError(f"{where}: expected a YAML mapping with keys wheel_radius, units, ...")
-    r_w = _number(data, "wheel_radius", where)
-    d_w = _number(data, "wheel_distance", where)
-    s_w = _number(data, "caster_offset", where)
-    dx = _number(data, "hub_com_offset", where, 0.0)
-    k_t = _number(data, "torque_constant", where)
-    alpha = _number(data, "friction_tanh_gain", where, 10.0)
-    for key, value, what in (("wheel_radius", r_w, "the wheel radius R_w in metres"),
-                             ("wheel_distance", d_w, "the distance d_w between the two wheels "
-                              "of a unit in metres"),
-                             ("torque_constant", k_t, "k_t in N m/A"),
-                             ("friction_tanh_gain", alpha, "alpha in s/rad")):
-        if value <= 0:
-            raise InputError(f"{where}: '{key}' must be > 0, got {value}; give {what}")
-    if s_w == 0:
-        raise InputError(
-            f"{where}: 'caster_offset' must be nonzero (the swivel model needs s_w ≠ 0); give "
-            "the distance from the pivot axis to the wheel axle in metres"
-        )
+    settings = _settings(data, where)
+    alpha = number(data, "friction_tanh_gain", where, 10.0)
+    if alpha <= 0:
+        raise InputError(f"{where}: 'friction_tanh_gain' must be > 0, got {alpha}; give "
+                         f"{TOP_LEVEL_TEXT['friction_tanh_gain']}")
     units_raw = data.get("units")
     if units_raw is None:
         raise InputError(f"{where}: missing key 'units' (a list of {{name, pivot}} entries)")
     if not isinstance(units_raw, list):
         raise InputError(f"{where}: 'units' must be a list of {{name, pivot}} entries, got "
                          f"{units_raw!r}")
-    if len(units_raw) < 2:
-        raise InputError(f"{where}: 'units' lists {len(units_raw)} unit(s); at least two needed "
-                         "— list every wheel unit with its name and pivot")
-    units = tuple(_unit(e, k, where) for k, e in enumerate(units_raw))
+    if len(units_raw) < min_units:
+        raise InputError(f"{where}: 'units' lists {len(units_raw)} unit(s); at least "
+                         f"{'two' if min_units == 2 else min_units} needed — list every wheel "
+                         "unit with its name and pivot")
+    units = tuple(_unit_type(e, k, where).parse_entry(e, k, where, settings)
+                  for k, e in enumerate(units_raw))
     seen: set[str] = set()
     for k, u in enumerate(units):
         if u.name in seen:
             raise InputError(f"{where}: 'units[{k}].name' {u.name!r} is used twice; names "
                              "must be unique")
         seen.add(u.name)
-    return Platform(str(data.get("name", "platform")), r_w, d_w, s_w, dx, k_t, alpha, units,
-                    where)
+    return Platform(str(data.get("name", "platform")), alpha, units, settings, where)
+
+
+def platform_of(specs: Sequence[Any], name: str = "platform", friction_tanh_gain: float = 10.0,
+                settings: dict[str, float] | None = None) -> Platform:
+    """A platform from unit specs built in code."""
+    return Platform(name, friction_tanh_gain, tuple(specs), dict(settings or {}))
 
 
 def load_platform(path: str | Path) -> Platform:

@@ -158,8 +158,8 @@ class LogPlot:
     start: np.ndarray  # first and last pose (3,)
     end: np.ndarray
     velocity: tuple[np.ndarray, np.ndarray]  # t (m, 3), q̇ (m, 3)
-    delta: tuple[np.ndarray, np.ndarray]  # t (m, n), unwrapped pivot angles (m, n) [rad]
-    torque: tuple[np.ndarray, np.ndarray]  # t (m, 2n), torques (m, 2n) [N m], L, R per unit
+    delta: tuple[np.ndarray, np.ndarray]  # t (m, w), unwrapped turning angles (m, w) [rad]
+    torque: tuple[np.ndarray, np.ndarray]  # t (m, A), actuator torques (m, A) [N m]
     samples: int  # samples the log gave (before resampling)
     duration: float  # [s]
     has_pose: bool  # the tracker's pose columns were given
@@ -182,8 +182,8 @@ class PlotGather:
 
     def push_samples(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, delta: np.ndarray,
                      torque: np.ndarray) -> None:
-        """Consecutive grid samples: pose q (m, 3), q̇ (m, 3), raw unwrapped δ (m, n),
-        torques (m, n, 2)."""
+        """Consecutive grid samples: pose q (m, 3), q̇ (m, 3), raw unwrapped turning angles
+        (the wrapped channels: swivel pivots) (m, w), actuator torques (m, A)."""
         if not len(t):
             return
         if self.start is None:
@@ -201,7 +201,8 @@ class PlotGather:
                span_samples: int, row_step: int) -> LogPlot:
         t, a, b, qd = self.rows.arrays()
         assert self.start is not None and self.end is not None
-        n = self.delta.lines()[1].shape[1]
+        w = self.delta.lines()[1].shape[1]
+        n_tau = self.torque.lines()[1].shape[1]
         return LogPlot(t, a, b, qd, self.rows.stride, self.path.lines(), self.start, self.end,
-                       self.velocity.lines(3), self.delta.lines(n), self.torque.lines(2 * n),
+                       self.velocity.lines(3), self.delta.lines(w), self.torque.lines(n_tau),
                        samples, duration, has_pose, dt, span_samples, row_step)

@@ -31,7 +31,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import HEAD_STEPS, MIN_SAMPLES_PIECE, check_times, split_log
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.odometry import odometry_from
+from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_angles
 from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.solve import Triangles, qr_triangle
@@ -261,10 +261,9 @@ class Preprocessed:
     q: np.ndarray  # (M, 3) pose
     qd: np.ndarray
     qdd: np.ndarray
-    delta: np.ndarray  # (M, n)
-    delta_dot: np.ndarray
-    phi_dot: np.ndarray  # (M, n, 2)
-    tau: np.ndarray  # (M, n, 2) wheel torques
+    angles: np.ndarray  # (M, J) smoothed unit angles (platform channel order)
+    angle_rates: np.ndarray  # (M, J)
+    tau: np.ndarray  # (M, A) actuator torques
     source: str
     span_samples: int
     dt: float
@@ -279,8 +278,8 @@ class Preprocessed:
     def take(self, index: slice | np.ndarray) -> Preprocessed:
         """The samples at ``index`` (a slice or indices) as a new block, untrimmed."""
         i = index
-        return Preprocessed(self.t[i], self.q[i], self.qd[i], self.qdd[i], self.delta[i],
-                            self.delta_dot[i], self.phi_dot[i], self.tau[i], self.source,
+        return Preprocessed(self.t[i], self.q[i], self.qd[i], self.qdd[i], self.angles[i],
+                            self.angle_rates[i], self.tau[i], self.source,
                             self.span_samples, self.dt, self.notes, 0, self.grid)
 
     def row_samples(self) -> np.ndarray:
@@ -293,6 +292,36 @@ class Preprocessed:
         return len(range(self.trim, len(self.t) - self.trim, self.grid.step))
 
 
+def delayed(t: np.ndarray, tau: np.ndarray, input_delay: float) -> np.ndarray:
+    """Torques (N, A) shifted later by ``input_delay`` [s]: the torque logged at t acts on the
+    motion at t + delay (linear interpolation, held at the first sample)."""
+    if not input_delay:
+        return tau
+    return np.stack([np.interp(t - input_delay, t, tau[:, j]) for j in range(tau.shape[1])],
+                    axis=1)
+
+
+def tracker_pose(pose: np.ndarray) -> np.ndarray:
+    """x_b, y_b and the unwrapped θ_b of a tracker pose (N, 3)."""
+    return np.column_stack([pose[:, :2], np.unwrap(pose[:, 2])])
+
+
+def derivatives(model: PlatformModel, angles_s: np.ndarray, pose_s: np.ndarray | None,
+                dt: float, odometry_start: OdometryState | None = None,
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The recipe's step after smoothing (Sec. VI-B), shared by the in-memory and streamed
+    paths: the pose by odometry from the smoothed angles (or the smoothed tracker pose), its
+    central differences, and the angle rates. Returns (q, q̇, q̈, angle rates, unwrapping
+    corrections of the angles)."""
+    if pose_s is None:
+        q, corr = odometry_from(model, angles_s, odometry_start)
+    else:
+        q, corr = pose_s, np.zeros_like(angles_s)
+    qd = signals.central_difference(q, dt)
+    qdd = signals.central_difference(qd, dt)
+    return q, qd, qdd, signals.central_difference(angles_s, dt), corr
+
+
 def preprocess(log: Log, platform: Platform, span: Span | None = None,
                input_delay: float = 0.0, row_step: int | None = None) -> Preprocessed:
     """Smooth, differentiate and trim one log (Sec. VI-B).
@@ -302,21 +331,20 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     per smoother span).
     """
     span = span or Span.parse(None)
+    model = PlatformModel(platform)
     notes = list(log.notes)
     t = log.t
     check_times(t, log.source)  # (a log read from a file was checked by its reader)
-    delta = np.unwrap(log.delta, axis=0)
-    phi, current = log.phi, log.current
+    angles, _ = unwrap_angles(platform.layout.wrapped, log.angles)
+    current = log.currents
     pose = log.pose
     dt = grid_step(t)
     steps = np.diff(t)
     if not on_grid(steps, dt):
-        t_new, delta = signals.resample_uniform(t, delta, dt)
-        _, phi = signals.resample_uniform(t, phi, dt)
+        t_new, angles = signals.resample_uniform(t, angles, dt)
         _, current = signals.resample_uniform(t, current, dt)
         if pose is not None:
-            _, pose = signals.resample_uniform(t, np.column_stack(
-                [pose[:, :2], np.unwrap(pose[:, 2])]), dt)
+            _, pose = signals.resample_uniform(t, tracker_pose(pose), dt)
         notes.append(jitter_note(log.source, steps.max(), steps.min(), dt))
         t = t_new
     n = len(t)
@@ -325,29 +353,18 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     grid = RowGrid.for_span(k, row_step)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
     check_length(log.source, n, k, dt, trim)
-    delta_s = signals.loess(delta, k)
-    phi_s = signals.loess(phi, k)
-    if pose is None:
-        q, _ = odometry_from(platform, delta_s, phi_s)
-    else:
-        q = signals.loess(np.column_stack([pose[:, :2], np.unwrap(pose[:, 2])]), k)
-    qd = signals.central_difference(q, dt)
-    qdd = signals.central_difference(qd, dt)
-    delta_dot = signals.central_difference(delta_s, dt)
-    phi_dot = signals.central_difference(phi_s, dt)
-    tau = platform.torque_constant * current
-    if input_delay:
-        flat = tau.reshape(n, -1)
-        tau = np.stack([np.interp(t - input_delay, t, flat[:, j]) for j in range(flat.shape[1])],
-                       axis=1).reshape(tau.shape)
-    return Preprocessed(t, q, qd, qdd, delta_s, delta_dot, phi_dot, tau, log.source, k, dt,
-                        notes, trim, grid)
+    angles_s = signals.loess(angles, k)
+    pose_s = None if pose is None else signals.loess(tracker_pose(pose), k)
+    q, qd, qdd, rates, _ = derivatives(model, angles_s, pose_s, dt)
+    tau = delayed(t, platform.torque_constants() * current, input_delay)
+    return Preprocessed(t, q, qd, qdd, angles_s, rates, tau, log.source, k, dt, notes, trim,
+                        grid)
 
 
 def raw_system(model: PlatformModel, pre: Preprocessed,
                friction: Friction = "per-wheel") -> tuple[np.ndarray, np.ndarray]:
     """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66)."""
-    st = model.state(pre.q, pre.qd, pre.delta, pre.delta_dot)
+    st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
     return model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
 
 

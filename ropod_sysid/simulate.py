@@ -1,9 +1,11 @@
 """Simulate logs with known parameters: forward dynamics (eq. 33) under a velocity controller.
 
 The controller is model-free, like the robot's own low-level one: the base-twist setpoint goes
-through the inverse kinematics for the *current* pivot angles (eqs. 8a, 11) to wheel-rate
-setpoints, tracked by one PI loop per wheel with a torque limit, updated at the integration
-rate (zero-order hold). The plant is integrated with fixed-step RK4 (default 1 kHz).
+through each unit type's inverse kinematics at the *current* unit angles (for the swivel: eqs.
+8a, 11 at the current pivot angles) to actuator-rate setpoints, tracked by one PI loop per
+actuator with a torque limit, updated at the integration rate (zero-order hold). The plant —
+the base pose and twist and every unit angle, whose rates each type gives — is integrated with
+fixed-step RK4 (default 1 kHz).
 
 Several runs of equal or different length can be simulated together: the model is vectorised
 over samples, and here the sample axis holds the runs (a batch), so four variants cost little
@@ -21,7 +23,7 @@ import numpy as np
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel, State
-from ropod_sysid.params import DynamicParameters
+from ropod_sysid.params import DynamicParameters, friction_of
 from ropod_sysid.platform import Platform
 from ropod_sysid.progress import Progress
 
@@ -136,41 +138,40 @@ class SimResult:
     q: np.ndarray  # (N, 3) true pose
     qd: np.ndarray  # (N, 3)
     qdd: np.ndarray  # (N, 3)
-    delta: np.ndarray  # (N, n) true pivot angles
-    phi: np.ndarray  # (N, n, 2)
-    tau: np.ndarray  # (N, n, 2) applied wheel torques
+    angles: np.ndarray  # (N, J) true unit angles (platform channel order)
+    tau: np.ndarray  # (N, A) applied actuator torques
     f_b: np.ndarray  # (N, 3) applied external force (base frame)
     energy: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) kinetic energy
 
 
-def initial_pivots(platform: Platform, setpoints: Setpoints) -> np.ndarray:
-    """Pivot angles that trail the first motion of the setpoints (every wheel behind its pivot).
-
-    For the first nonzero twist (vx, vy, ω) each pivot moves with v_i = (vx − ω y_i, vy + ω x_i)
-    in the base frame; the unit is aligned with it. Zero when the setpoints never move.
-    """
+def first_twist(setpoints: Setpoints) -> np.ndarray:
+    """The first nonzero base-frame twist (vx, vy, ω) of the setpoints (zero if none)."""
     sp = np.stack([setpoints.vx, setpoints.vy, setpoints.omega], axis=-1)
     moving = np.flatnonzero(np.abs(sp).sum(axis=1) > 1e-9)
-    if moving.size == 0:
-        return np.zeros(platform.n_units)
-    vx, vy, w = sp[moving[0]]
-    p = platform.pivots
-    return np.arctan2(vy + w * p[:, 0], vx - w * p[:, 1])
+    return sp[moving[0]] if moving.size else np.zeros(3)
+
+
+def initial_angles(platform: Platform, setpoints: Setpoints) -> np.ndarray:
+    """Unit angles at rest that suit the first motion of the setpoints (a swivel unit trails
+    it: every wheel behind its pivot); (J,)."""
+    return PlatformModel(platform).initial_angles(first_twist(setpoints))
 
 
 def simulate(platform: Platform, params: DynamicParameters,
              setpoints: Setpoints | Sequence[Setpoints], *, rate: float = 200.0,
              dt: float = 1e-3, controller: Controller | None = None,
              sensors: Sensors | None = None, force: ForceSchedule | None = None,
-             initial_delta: np.ndarray | str | None = "auto", quiet: bool = True,
+             initial: np.ndarray | str | None = "auto", quiet: bool = True,
              source: str = "<simulation>") -> list[SimResult]:
     """Simulate one run per setpoint series, all integrated together.
 
     Parameters
     ----------
     rate : log sample rate [Hz]; ``dt`` : integration and control step [s] (≤ 1 ms).
-    initial_delta : (n,) pivot angles at rest, ``"auto"`` to trail the first motion, or None
-        for all zero (units aligned with the base x axis).
+    initial : (J,) unit angles at rest, ``"auto"`` to suit the first motion
+        (:func:`initial_angles`), or None for all zero (swivel units aligned with the base x
+        axis). The friction variant follows from the parameter names
+        (:func:`ropod_sysid.params.friction_of`).
 
     Returns one :class:`SimResult` per setpoint series, sampled at ``rate``.
     """
@@ -179,42 +180,41 @@ def simulate(platform: Platform, params: DynamicParameters,
     sensors = sensors or Sensors()
     check_run(rate, dt, controller, sensors)
     params.check_physical()
+    friction = friction_of(params)
     model = PlatformModel(platform)
-    n_units = platform.n_units
+    n_ang, n_act = platform.layout.n_angles, platform.layout.n_currents
     n_runs = len(runs)
     durations = np.array([r.duration for r in runs])
     t0 = np.array([r.t[0] for r in runs])
     steps = int(np.ceil(durations.max() / dt))
     stride = int(round(1.0 / (rate * dt)))  # whole (check_run)
 
-    if isinstance(initial_delta, str):
-        delta0 = np.stack([initial_pivots(platform, r) for r in runs])
-    elif initial_delta is None:
-        delta0 = np.zeros((n_runs, n_units))
+    if isinstance(initial, str):
+        ang0 = np.stack([initial_angles(platform, r) for r in runs])
+    elif initial is None:
+        ang0 = np.zeros((n_runs, n_ang))
     else:
-        delta0 = np.broadcast_to(np.asarray(initial_delta, float), (n_runs, n_units)).copy()
+        ang0 = np.broadcast_to(np.asarray(initial, float), (n_runs, n_ang)).copy()
 
     q = np.zeros((n_runs, 3))
     qd = np.zeros((n_runs, 3))
-    delta = delta0
-    phi = np.zeros((n_runs, n_units, 2))
-    integ = np.zeros((n_runs, n_units, 2))
+    angles = ang0
+    integ = np.zeros((n_runs, n_act))
 
     n_rec = steps // stride + 1
     rec_q = np.empty((n_rec, n_runs, 3))
     rec_qd = np.empty_like(rec_q)
     rec_qdd = np.empty_like(rec_q)
-    rec_delta = np.empty((n_rec, n_runs, n_units))
-    rec_phi = np.empty((n_rec, n_runs, n_units, 2))
-    rec_tau = np.empty_like(rec_phi)
+    rec_ang = np.empty((n_rec, n_runs, n_ang))
+    rec_tau = np.empty((n_rec, n_runs, n_act))
     rec_fb = np.zeros((n_rec, n_runs, 3))
     rec_e = np.empty((n_rec, n_runs))
 
-    def deriv(q: np.ndarray, qd: np.ndarray, delta: np.ndarray, tau: np.ndarray,
+    def deriv(q: np.ndarray, qd: np.ndarray, angles: np.ndarray, tau: np.ndarray,
               f_b: np.ndarray | None, st: State | None = None) -> tuple[np.ndarray, ...]:
-        st = st if st is not None else model.state(q, qd, delta)
-        qdd = model.forward_dynamics(st, params, tau, f_b)
-        return qd, qdd, st.pivot_rate, st.wheel_rate
+        st = st if st is not None else model.state(q, qd, angles)
+        qdd = model.forward_dynamics(st, params, tau, f_b, friction)
+        return qd, qdd, st.angle_rate
 
     # setpoints and external force on the step grid, interpolated once: (steps + 1, runs, 3)
     grid = t0[None, :] + dt * np.arange(steps + 1)[:, None]
@@ -224,39 +224,39 @@ def simulate(platform: Platform, params: DynamicParameters,
 
     with Progress(steps, "simulate", quiet=quiet) as bar:
         for step in range(steps + 1):
-            # controller (zero-order hold over the step): IK for the current pivot angles
+            # controller (zero-order hold over the step): IK for the current unit angles
             sp = sp_all[step]
             c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
             qd_set = np.stack([c * sp[:, 0] - s * sp[:, 1], s * sp[:, 0] + c * sp[:, 1],
                                sp[:, 2]], axis=-1)
-            st = model.state(q, qd, delta)
-            want = model.wheel_rates(q, qd_set, delta)
-            err = want - st.wheel_rate
+            st = model.state(q, qd, angles)
+            want = model.actuator_rates(q, qd_set, angles)
+            err = want - st.actuator_rate
             tau_raw = controller.kp * err + controller.ki * (integ + err * dt)
             tau = np.clip(tau_raw, -controller.torque_limit, controller.torque_limit)
             saturated = tau != tau_raw
             integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
             f_b = None if f_all is None else f_all[step]
-            k1 = deriv(q, qd, delta, tau, f_b, st)
+            k1 = deriv(q, qd, angles, tau, f_b, st)
             if step % stride == 0:
                 k = step // stride
                 rec_q[k], rec_qd[k], rec_qdd[k] = q, qd, k1[1]
-                rec_delta[k], rec_phi[k], rec_tau[k] = delta, phi, tau
+                rec_ang[k], rec_tau[k] = angles, tau
                 if f_b is not None:
                     rec_fb[k] = f_b
                 rec_e[k] = model.kinetic_energy(st, params)
             if step == steps:
                 break
             # RK4 with τ held over the step
-            y = (q, qd, delta, phi)
+            y = (q, qd, angles)
             y2 = tuple(a + 0.5 * dt * b for a, b in zip(y, k1, strict=True))
-            k2 = deriv(*y2[:3], tau, f_b)
+            k2 = deriv(*y2, tau, f_b)
             y3 = tuple(a + 0.5 * dt * b for a, b in zip(y, k2, strict=True))
-            k3 = deriv(*y3[:3], tau, f_b)
+            k3 = deriv(*y3, tau, f_b)
             y4 = tuple(a + dt * b for a, b in zip(y, k3, strict=True))
-            k4 = deriv(*y4[:3], tau, f_b)
-            q, qd, delta, phi = (a + dt / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
-                                 for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True))
+            k4 = deriv(*y4, tau, f_b)
+            q, qd, angles = (a + dt / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
+                             for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True))
             bar.update(1)
 
     rng = np.random.default_rng(sensors.seed)
@@ -268,7 +268,7 @@ def simulate(platform: Platform, params: DynamicParameters,
         res = SimResult(
             log=None,  # type: ignore[arg-type]
             q=rec_q[sl].copy(), qd=rec_qd[sl].copy(), qdd=rec_qdd[sl].copy(),
-            delta=rec_delta[sl].copy(), phi=rec_phi[sl].copy(), tau=rec_tau[sl].copy(),
+            angles=rec_ang[sl].copy(), tau=rec_tau[sl].copy(),
             f_b=rec_fb[sl].copy(), energy=rec_e[sl].copy(),
         )
         res.log = record(platform, res, t_true, sensors, rng, source)
@@ -279,7 +279,7 @@ def simulate(platform: Platform, params: DynamicParameters,
 def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,
            rng: np.random.Generator, source: str) -> Log:
     """The contract log of a simulated run, with the sensor effects of ``sensors``."""
-    delta, phi = res.delta, res.phi
+    angles = res.angles
     t_log = t.copy()
     if sensors.jitter > 0:
         # the sample is taken at a jittered instant; the angles are those at that instant
@@ -287,18 +287,14 @@ def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,
         jit[0] = 0.0
         t_log = t + jit
         t_log[1:] = np.maximum(t_log[1:], t_log[:-1] + 1e-6)
-        delta = _interp_rows(t_log, t, delta)
-        phi = _interp_rows(t_log, t, phi)
+        angles = _interp_rows(t_log, t, angles)
     if sensors.encoder_counts:
         step = 2 * np.pi / sensors.encoder_counts
-        delta = np.round(delta / step) * step
-        phi = np.round(phi / step) * step
-    current = res.tau / platform.torque_constant
+        angles = np.round(angles / step) * step
+    current = res.tau / platform.torque_constants()
     if sensors.current_noise > 0:
         current = current + rng.normal(0.0, sensors.current_noise, size=current.shape)
-    notes = []
-    return Log(t_log, platform.unit_names, np.array(delta), np.array(phi), current, None,
-               source, notes)
+    return Log(t_log, platform.layout, np.array(angles), current, None, source, [])
 
 
 def _interp_rows(t_new: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -62,8 +62,8 @@ from ropod_sysid.grid import _Grid, _OffGrid, _Samples
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import piece_name, piece_note, split_chunks
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.odometry import OdometryState, odometry_from
-from ropod_sysid.params import DynamicParameters, Friction
+from ropod_sysid.odometry import OdometryState
+from ropod_sysid.params import DynamicParameters, Friction, friction_of, parameter_names
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
@@ -75,6 +75,8 @@ from ropod_sysid.regressor import (
     check_input_delay,
     check_length,
     check_piece_samples,
+    delayed,
+    derivatives,
     left_out,
     no_piece_left,
     row_inputs,
@@ -137,6 +139,7 @@ class _Blocks:
                  plot: bool = False) -> None:
         self.platform = platform
         self.model = PlatformModel(platform)
+        self.k_t = platform.torque_constants()
         self.span = span
         self.delay = float(input_delay)
         self.friction = friction
@@ -177,7 +180,7 @@ class _Blocks:
             self.obs_step = observer_step(dt, self.grid.step)
             self.sos = _signal.butter(2, float(OBSERVER_CUTOFF_HZ), btype="low",
                                       fs=1.0 / (dt * self.obs_step), output="sos")
-            self.m_params = self.params.vector(self.platform.unit_names, "per-wheel")
+            self.m_params = self.params.vector(self.model.parameter_names(self.friction))
 
     def push(self, samples: _Samples) -> None:
         if len(samples):
@@ -260,24 +263,14 @@ class _Blocks:
         w = self._window(r0, r1)
         q1 = r1 if last else e + halo + 2
         i0, i1 = qa - r0, q1 - r0
-        delta = signals.loess(w.delta, k)[i0:i1]
-        phi = signals.loess(w.phi, k)[i0:i1]
-        if w.pose is None:
-            q, corr = odometry_from(self.platform, delta, phi, None if first else self.odo)
-            if not last:
-                j = (e - halo - 2) - qa  # the next block's first pose sample
-                self.odo = OdometryState(q[j].copy(), corr[j].copy())
-        else:
-            q = signals.loess(w.pose, k)[i0:i1]
-        qd = signals.central_difference(q, dt)
-        qdd = signals.central_difference(qd, dt)
-        delta_dot = signals.central_difference(delta, dt)
-        phi_dot = signals.central_difference(phi, dt)
-        tau = self.platform.torque_constant * w.current
-        if self.delay:
-            flat = tau.reshape(len(w), -1)
-            tau = np.stack([np.interp(w.t - self.delay, w.t, flat[:, j])
-                            for j in range(flat.shape[1])], axis=1).reshape(tau.shape)
+        angles = signals.loess(w.angles, k)[i0:i1]
+        pose = None if w.pose is None else signals.loess(w.pose, k)[i0:i1]
+        q, qd, qdd, rates, corr = derivatives(self.model, angles, pose, dt,
+                                              None if first else self.odo)
+        if w.pose is None and not last:
+            j = (e - halo - 2) - qa  # the next block's first pose sample
+            self.odo = OdometryState(q[j].copy(), corr[j].copy())
+        tau = delayed(w.t, self.k_t * w.currents, self.delay)
         # samples [pa, pb) are preprocessed: the rows need [s - halo, e + halo); the
         # observer, every sample from 0 to n
         pa, pb = s - halo, e + halo
@@ -286,12 +279,13 @@ class _Blocks:
             pa, pb = min(pa, oa), max(pb, ob)
         if self.gather is not None:  # every sample once, as the observer sees them
             jo, jp = slice(oa - r0, ob - r0), slice(oa - qa, ob - qa)
-            self.gather.push_samples(w.t[jo], q[jp], qd[jp], w.delta[jo],
-                                     self.platform.torque_constant * w.current[jo])
+            self.gather.push_samples(w.t[jo], q[jp], qd[jp],
+                                     w.angles[jo][:, self.platform.layout.wrapped],
+                                     self.k_t * w.currents[jo])
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
-        pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], delta[jq], delta_dot[jq],
-                           phi_dot[jq], tau[jr], self.source, k, dt, [], 0, self.grid)
+        pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], angles[jq], rates[jq], tau[jr],
+                           self.source, k, dt, [], 0, self.grid)
         self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)), pa, oa, ob,
                      last)
 
@@ -314,8 +308,8 @@ class _Blocks:
         step = self.obs_step
         idx = observer_samples(oa, ob - step // 2 if last else ob, step)
         at = row_inputs(pre, idx - pa, step)
-        st = self.model.state(at.q, at.qd, at.delta, at.delta_dot)
-        f_b = self.model.disturbance(st, self.params, at.qdd, at.tau)
+        st = self.model.state(at.q, at.qd, at.angles, at.angle_rates)
+        f_b = self.model.disturbance(st, self.params, at.qdd, at.tau, self.friction)
         if self.zi is None:
             self.zi = np.zeros((self.sos.shape[0], 2, f_b.shape[1]))
         from scipy import signal as _signal
@@ -526,8 +520,8 @@ def validate_pieces(source: Source, platform: Platform, params: DynamicParameter
                     ) -> list[LogValidation]:
     """:func:`validate_source` of a log, or of each of its pieces with ``split_gaps``."""
     return [_validation(res, platform, params)
-            for res in stream_pieces(source, platform, span, input_delay, "per-wheel", chunk,
-                                     params, keep_series, row_step=row_step,
+            for res in stream_pieces(source, platform, span, input_delay, friction_of(params),
+                                     chunk, params, keep_series, row_step=row_step,
                                      split_gaps=split_gaps)]
 
 
@@ -535,7 +529,7 @@ def _validation(res: StreamResult, platform: Platform, params: DynamicParameters
                 ) -> LogValidation:
     obs = res.observer
     assert obs is not None
-    m = params.vector(platform.unit_names, "per-wheel")
+    m = params.vector(parameter_names(platform, friction_of(params)))
     count = max(obs.count, 1)
     keys = ("F_bx", "F_by", "T_bz")
     t = np.concatenate(obs.t) if obs.t else np.zeros(0)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ropod_sysid.fit import FitResult
 from ropod_sysid.io.paramfile import ParameterFile
-from ropod_sysid.params import UNITS_OF, kind_of
+from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
 from ropod_sysid.validate import LogValidation
 
 
@@ -39,7 +39,7 @@ def relative_std(result: FitResult) -> np.ndarray:
 
 def implausible(name: str, value: float) -> bool:
     """Physically implausible: negative mass or inertia."""
-    return kind_of(name) in ("m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w") and value < 0
+    return is_inertial(name) and value < 0
 
 
 def difference(value: float, std: float, other: float | None

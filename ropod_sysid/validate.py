@@ -15,7 +15,7 @@ import numpy as np
 from ropod_sysid import signals
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import DynamicParameters
+from ropod_sysid.params import DynamicParameters, friction_of
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Preprocessed, Span, preprocess, row_inputs, triangles
 
@@ -67,8 +67,8 @@ def disturbance_estimate(model: PlatformModel, pre: Preprocessed, params: Dynami
     n = len(pre.t)
     idx = observer_samples(0, n - step // 2, step)
     at = row_inputs(pre, idx, step)
-    st = model.state(at.q, at.qd, at.delta, at.delta_dot)
-    f_b = model.disturbance(st, params, at.qdd, at.tau)
+    st = model.state(at.q, at.qd, at.angles, at.angle_rates)
+    f_b = model.disturbance(st, params, at.qdd, at.tau, friction_of(params))
     f_hat = signals.lowpass(f_b, pre.dt * step, cutoff_hz)
     keep = (idx >= pre.trim) & (idx < n - pre.trim)
     return pre.t[idx[keep]], f_hat[keep]
@@ -81,8 +81,9 @@ def validate_log(log: Log, platform: Platform, params: DynamicParameters,
     ``input_delay`` and ``row_step`` as the fit's)."""
     model = PlatformModel(platform)
     pre = preprocess(log, platform, span, input_delay, row_step)
-    m = params.vector(platform.unit_names, "per-wheel")
-    tri = triangles(model, pre, "per-wheel")
+    friction = friction_of(params)
+    m = params.vector(model.parameter_names(friction))
+    tri = triangles(model, pre, friction)
     t, f_hat = disturbance_estimate(model, pre, params)
     force = np.hypot(f_hat[:, 0], f_hat[:, 1])
     return LogValidation(

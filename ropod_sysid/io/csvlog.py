@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import gzip
-import re
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -43,15 +42,12 @@ from ropod_sysid.platform import Platform
 
 POSE_COLUMNS = ("x_b", "y_b", "theta_b")
 MIN_SAMPLES = 3
-_UNIT_COLUMN = re.compile(r"^(?:delta_(\w+)|phi_(\w+)[LR]|cur_(\w+)[LR])$")
 
 
-def contract_columns(units: list[str]) -> list[str]:
-    """The required columns for these unit names, in contract order."""
-    cols = ["t"]
-    for u in units:
-        cols += [f"delta_{u}", f"phi_{u}L", f"phi_{u}R", f"cur_{u}L", f"cur_{u}R"]
-    return cols
+def contract_columns(platform: Platform) -> list[str]:
+    """The required columns of the platform's log, in contract order: ``t``, then per unit
+    its angle and current channels (``docs/file-formats.md``)."""
+    return ["t", *platform.layout.columns()]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -61,8 +57,9 @@ def contract_columns(units: list[str]) -> list[str]:
 def read_csv_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
     """Read a contract CSV log for ``platform`` (``.csv``, or gzip-compressed ``.csv.gz``).
 
-    Columns ``t``, ``delta_u``, ``phi_uL``, ``phi_uR``, ``cur_uL``, ``cur_uR`` for every unit
-    ``u`` of the platform are required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
+    Columns ``t`` and every unit's channels (for a smart wheel ``u``: ``delta_u``, ``phi_uL``,
+    ``phi_uR``, ``cur_uL``, ``cur_uR``; :attr:`ropod_sysid.platform.Platform.layout`) are
+    required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
     none); other columns are ignored. Every problem raises :class:`InputError` with one line that
     names the file, the line and/or column, and the fix; so does a bad time base
     (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
@@ -137,7 +134,7 @@ def _layout(path: Path, where: str, platform: Platform
     """Header checks: (number of fields, wanted column names, their indices, pose present)."""
     header = _read_header(path, where)
     names = [h.strip() for h in header]
-    required = contract_columns(platform.unit_names)
+    required = contract_columns(platform)
     _check_columns(names, required, platform, where)
     pose_present = _all_or_none(names, POSE_COLUMNS, where)
     wanted = required + (list(POSE_COLUMNS) if pose_present else [])
@@ -147,16 +144,11 @@ def _layout(path: Path, where: str, platform: Platform
 
 def _to_log(data: np.ndarray, platform: Platform, pose_present: bool, where: str) -> Log:
     """The log of the wanted columns ``data`` (k, N) in contract order."""
-    units = platform.unit_names
-    n = data.shape[1]
-    n_units = len(units)
-    unit_block = data[1:1 + 5 * n_units].reshape(n_units, 5, n)
-    delta = np.ascontiguousarray(unit_block[:, 0, :].T)
-    phi = np.ascontiguousarray(unit_block[:, 1:3, :].transpose(2, 0, 1))
-    current = np.ascontiguousarray(unit_block[:, 3:5, :].transpose(2, 0, 1))
-    pose = np.ascontiguousarray(data[1 + 5 * n_units:].T) if pose_present else None
-    return Log(t=np.ascontiguousarray(data[0]), units=list(units), delta=delta, phi=phi,
-               current=current, pose=pose, source=where)
+    lay = platform.layout
+    base = 1 + len(lay.angle_names) + len(lay.current_names)
+    angles, currents = lay.split(data[1:base].T)
+    pose = np.ascontiguousarray(data[base:base + 3].T) if pose_present else None
+    return Log(np.ascontiguousarray(data[0]), lay, angles, currents, pose, where)
 
 
 def _rechunk(blocks: Iterator[np.ndarray], rows: int) -> Iterator[np.ndarray]:
@@ -258,8 +250,8 @@ def _read_header(path: Path, where: str) -> list[str]:
     if not raw.strip():
         if blank_file:
             raise InputError(
-                f"{where}: the file is empty; a log needs a header row (t, delta_u, phi_uL, "
-                "phi_uR, cur_uL, cur_uR) and data rows"
+                f"{where}: the file is empty; a log needs a header row (t and the unit "
+                "channels, e.g. delta_u, phi_uL, phi_uR, cur_uL, cur_uR) and data rows"
             )
         raise InputError(
             f"{where}: line 1 is empty; the first line must be the header row naming the columns "
@@ -296,7 +288,7 @@ def _check_columns(names: list[str], required: list[str], platform: Platform,
     if "t" in missing and names and _NUMBER.match(names[0]):
         raise InputError(
             f"{where}: line 1 looks like data, not a header; the first line must name the "
-            f"columns t, delta_u, phi_uL, phi_uR, cur_uL, cur_uR for units {units_txt}"
+            f"columns {platform.columns_text()}"
         )
     if len(names) == 1:
         for sep, label in ((";", "semicolons"), ("\t", "tabs"), ("|", "'|'")):
@@ -307,25 +299,23 @@ def _check_columns(names: list[str], required: list[str], platform: Platform,
                 )
     log_units: list[str] = []
     for name in names:
-        m = _UNIT_COLUMN.match(name)
-        if m:
-            u = next(g for g in m.groups() if g is not None)
-            if u not in log_units:
-                log_units.append(u)
+        u = platform.unit_of_column(name)
+        if u is not None and u not in log_units:
+            log_units.append(u)
     absent = [u for u in platform.unit_names if u not in log_units]
     if log_units and absent:
         raise InputError(
             f"{where}: the log has columns for unit{'s' if len(log_units) > 1 else ''} "
             f"{', '.join(log_units)} but the platform '{platform.name}' expects units "
             f"{units_txt}; use the platform file that matches the log or rename the columns "
-            "(delta_u, phi_uL, …)"
+            f"({platform.columns_text()})"
         )
     shown = ", ".join(repr(c) for c in missing[:6])
     more = f" and {len(missing) - 6} more" if len(missing) > 6 else ""
     verb = "is" if len(missing) == 1 else "are"
     raise InputError(
         f"{where}: column{'s' if len(missing) > 1 else ''} {shown}{more} {verb} missing; the log "
-        f"needs t, delta_u, phi_uL, phi_uR, cur_uL, cur_uR for units {units_txt}"
+        f"needs {platform.columns_text()}"
     )
 
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ropod_sysid.platform import Layout
+
 
 @dataclass
 class Log:
@@ -15,16 +17,17 @@ class Log:
     ----------
     t : (N,) float64
         Time [s], strictly increasing.
-    units : list[str]
-        Unit names in platform-file order.
-    delta : (N, n) float64
-        Pivot angles δ_i [rad].
-    phi : (N, n, 2) float64
-        Wheel angles φ_iL, φ_iR [rad], unwrapped, rolling forward positive.
-    current : (N, n, 2) float64
-        Motor currents of the left and right wheel [A].
+    layout : Layout
+        The platform's channels (:attr:`ropod_sysid.platform.Platform.layout`): unit names,
+        the names of the angle and current columns.
+    angles : (N, J) float64
+        Encoder angles [rad] of every unit, in ``layout.angle_names`` order (for a smart
+        wheel: pivot δ, wheels φ_L, φ_R); wheel angles unwrapped.
+    currents : (N, A) float64
+        Motor currents [A] in ``layout.current_names`` order.
     pose : (N, 3) float64 or None
-        Base pose x_b, y_b, θ_b from an external tracker, when the log has it.
+        Base pose x_b, y_b, θ_b from an external tracker, when the log has it; a tracker
+        slower than the log leaves NaN rows between its frames.
     source : str
         File the log came from (for messages).
     notes : list[str]
@@ -35,14 +38,17 @@ class Log:
     """
 
     t: np.ndarray
-    units: list[str]
-    delta: np.ndarray
-    phi: np.ndarray
-    current: np.ndarray
+    layout: Layout
+    angles: np.ndarray
+    currents: np.ndarray
     pose: np.ndarray | None = None
     source: str = "<memory>"
     notes: list[str] = field(default_factory=list)
     piece: int = 0
+
+    @property
+    def units(self) -> list[str]:
+        return list(self.layout.units)
 
     @property
     def n_samples(self) -> int:
@@ -52,15 +58,18 @@ class Log:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0]) if self.n_samples else 0.0
 
+    def channel(self, name: str) -> np.ndarray:
+        """One contract column by name (``delta_1``, ``cur_3``, ``x_b`` …), shape (N,)."""
+        return self.columns()[name]
+
     def columns(self) -> dict[str, np.ndarray]:
-        """The log as contract columns (``t``, ``delta_u``, ``phi_uL`` …) in contract order."""
+        """The log as contract columns (``t``, then per unit its angles and currents)."""
+        lay = self.layout
+        by_name = dict(zip(lay.angle_names, self.angles.T, strict=True))
+        by_name |= dict(zip(lay.current_names, self.currents.T, strict=True))
         cols: dict[str, np.ndarray] = {"t": self.t}
-        for i, u in enumerate(self.units):
-            cols[f"delta_{u}"] = self.delta[:, i]
-            cols[f"phi_{u}L"] = self.phi[:, i, 0]
-            cols[f"phi_{u}R"] = self.phi[:, i, 1]
-            cols[f"cur_{u}L"] = self.current[:, i, 0]
-            cols[f"cur_{u}R"] = self.current[:, i, 1]
+        for name in lay.columns():
+            cols[name] = by_name[name]
         if self.pose is not None:
             cols["x_b"], cols["y_b"], cols["theta_b"] = self.pose.T
         return cols
@@ -68,9 +77,8 @@ class Log:
     def slice(self, start: int, stop: int) -> Log:
         """Samples ``start:stop`` as a new log."""
         pose = None if self.pose is None else self.pose[start:stop]
-        return Log(self.t[start:stop], list(self.units), self.delta[start:stop],
-                   self.phi[start:stop], self.current[start:stop], pose, self.source,
-                   list(self.notes), self.piece)
+        return Log(self.t[start:stop], self.layout, self.angles[start:stop],
+                   self.currents[start:stop], pose, self.source, list(self.notes), self.piece)
 
 
 def join_logs(parts: list[Log], notes: list[str] | None = None) -> Log:
@@ -83,6 +91,5 @@ def join_logs(parts: list[Log], notes: list[str] | None = None) -> Log:
         return np.concatenate([getattr(p, name) for p in parts])
 
     pose = None if first.pose is None else cat("pose")
-    return Log(cat("t"), list(first.units), cat("delta"), cat("phi"), cat("current"), pose,
-               first.source, [n for p in parts for n in p.notes] if notes is None else notes,
-               first.piece)
+    return Log(cat("t"), first.layout, cat("angles"), cat("currents"), pose, first.source,
+               [n for p in parts for n in p.notes] if notes is None else notes, first.piece)

@@ -38,7 +38,6 @@ from ropod_sysid.io.timebase import message_numbers
 from ropod_sysid.platform import Platform
 
 MIN_SAMPLES = 3
-UNIT_FIELDS = ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
 POSE_FIELDS = ("x_b", "y_b", "theta_b")
 _FLOAT_MAX = int(np.finfo(np.float64).max)   # a larger JSON integer overflows a float
 
@@ -166,9 +165,15 @@ class BatchDecoder:
 
 
 def contract_decoder(encoding: str, schema: Any, topic: str, where: str,
-                     units: list[str]) -> BatchDecoder:
+                     platform: Platform) -> BatchDecoder:
     if encoding == "json":
-        return BatchDecoder("json", json.loads, columns_of=lambda p: _arrow_columns(p, units))
+        fields = platform.layout.fields
+        return BatchDecoder("json", json.loads, columns_of=lambda p: _arrow_columns(p, fields))
+    if set(platform.types) != {"swivel"}:
+        raise InputError(f"{where}: the ROS 2 layout of ropod-sysid carries smart-wheel "
+                         "(swivel) units only, and the platform has "
+                         f"{', '.join(t for t in platform.types if t != 'swivel')} units; "
+                         "record JSON MCAP or CSV for this platform")
     return BatchDecoder("ros2", ros2_decoder(schema, topic, where), contract_layout)
 
 
@@ -193,10 +198,11 @@ def contract_log(rows: Rows, decoder: BatchDecoder, platform: Platform, where: s
         objects = rows.objects
         if arrays is None and objects is None:
             objects = [_parse(p) for p in rows.payloads]
+        fields = platform.layout.fields
         if arrays is None:
-            arrays = _json_columns(objects, platform.unit_names, has_pose)
+            arrays = _json_columns(objects, fields, has_pose)
         if arrays is None:
-            arrays = _json_loop(objects, platform.unit_names, has_pose, where, offset)
+            arrays = _json_loop(objects, fields, has_pose, where, offset)
     else:
         arrays = _ros2_columns(rows, decoder, platform, where)
         if arrays is None:
@@ -211,7 +217,7 @@ class ContractPieces:
 
     def __init__(self, stream: Any, platform: Platform, where: str) -> None:
         self.decoder = contract_decoder(stream.encoding, stream.schema, stream.channel.topic,
-                                        where, platform.unit_names)
+                                        where, platform)
         self.platform, self.where = platform, where
         self.locate = message_numbers()
 
@@ -228,8 +234,10 @@ def _parse(payload: bytes) -> Any:
         return json.loads(payload)
 
 
-def _arrow_columns(payloads: list[bytes], units: list[str]) -> dict[str, np.ndarray] | None:
-    """t (n,), values (n, units, 5), pose (n, 3) and pose_ok (n,) of JSON messages, parsed by
+def _arrow_columns(payloads: list[bytes], fields: list[tuple[str, str]]
+                   ) -> dict[str, np.ndarray] | None:
+    """t (n,), values (n, F) (the layout's (unit, field) pairs ``fields``), pose (n, 3) and
+    pose_ok (n,) of JSON messages, parsed by
     Arrow's JSON reader (columns straight from the text, without the GIL); None unless every
     message is one line of UTF-8 holding every field as a number, and no value is a negative
     zero (``-0`` is 0.0 to Python's parser, -0.0 to Arrow's): then the messages are parsed
@@ -246,8 +254,11 @@ def _arrow_columns(payloads: list[bytes], units: list[str]) -> dict[str, np.ndar
     except UnicodeDecodeError:
         return None
     num = pa.float64()
-    unit = pa.struct([(f, num) for f in UNIT_FIELDS])
-    schema = pa.schema([("t", num), ("units", pa.struct([(u, unit) for u in units])),
+    units = list(dict.fromkeys(u for u, _ in fields))
+    per_unit = {u: [f for v, f in fields if v == u] for u in units}
+    schema = pa.schema([("t", num),
+                        ("units", pa.struct([(u, pa.struct([(f, num) for f in per_unit[u]]))
+                                             for u in units])),
                         ("pose", pa.struct([(f, num) for f in POSE_FIELDS]))])
     try:
         table = pajson.read_json(
@@ -266,16 +277,18 @@ def _arrow_columns(payloads: list[bytes], units: list[str]) -> dict[str, np.ndar
     us = table.column("units").combine_chunks()
     if t is None or us.null_count:
         return None
-    values = np.empty((n, len(units), 5))
-    for i in range(len(units)):
+    values = np.empty((n, len(fields)))
+    k = 0
+    for i, u in enumerate(units):
         e = us.field(i)
         if e.null_count:
             return None
-        for j in range(5):
+        for j in range(len(per_unit[u])):
             c = col(e.field(j))
             if c is None:
                 return None
-            values[:, i, j] = c
+            values[:, k] = c
+            k += 1
     pose = table.column("pose").combine_chunks()
     ok = ~pose.is_null().to_numpy(zero_copy_only=False)
     xyz = np.empty((n, 3))
@@ -288,14 +301,15 @@ def _arrow_columns(payloads: list[bytes], units: list[str]) -> dict[str, np.ndar
     return {"t": t, "values": values, "pose": xyz, "pose_ok": ok}
 
 
-def _json_columns(decoded: list[Any], units: list[str], has_pose: bool
+def _json_columns(decoded: list[Any], fields: list[tuple[str, str]], has_pose: bool
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None] | None:
     """t, values and pose of parsed JSON messages, one list per field; None when any message
     is unusual (a missing key, a value that is no plain number, a NaN: let the loop say)."""
     try:
         cols = [[m["t"] for m in decoded]]
-        per_unit = [[m["units"][u] for m in decoded] for u in units]
-        cols += [[e[f] for e in es] for es in per_unit for f in UNIT_FIELDS]
+        units = list(dict.fromkeys(u for u, _ in fields))
+        entries = {u: [m["units"][u] for m in decoded] for u in units}
+        cols += [[e[f] for e in entries[u]] for u, f in fields]
         if has_pose:
             poses = [m["pose"] for m in decoded]
             cols += [[p[f] for p in poses] for f in POSE_FIELDS]
@@ -305,41 +319,51 @@ def _json_columns(decoded: list[Any], units: list[str], has_pose: bool
     if table.dtype.kind not in "fiu" or not np.isfinite(table).all():
         return None
     table = table.astype(np.float64, copy=False)
-    n, n_units = len(decoded), len(units)
-    vals = table[1:1 + 5 * n_units].reshape(n_units, 5, n).transpose(2, 0, 1)
-    pose = table[1 + 5 * n_units:].T if has_pose else None
-    return table[0], vals, pose
+    m = len(fields)
+    pose = table[1 + m:].T if has_pose else None
+    return table[0], table[1:1 + m].T, pose
 
 
-def _json_loop(decoded: list[Any], units: list[str], has_pose: bool, where: str, offset: int
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+def _needs(fields: list[tuple[str, str]]) -> str:
+    """The unit fields a message needs, in words (``delta, phi_L, … of every unit``)."""
+    per_unit: dict[str, list[str]] = {}
+    for u, f in fields:
+        per_unit.setdefault(u, []).append(f)
+    kinds = list(dict.fromkeys(tuple(v) for v in per_unit.values()))
+    if len(kinds) == 1:
+        return f"t and {', '.join(kinds[0])} of every unit"
+    return "t and " + "; ".join(
+        f"{', '.join(k)} of unit{'s' if sum(v == list(k) for v in per_unit.values()) > 1 else ''}"
+        f" {', '.join(u for u, v in per_unit.items() if v == list(k))}" for k in kinds)
+
+
+def _json_loop(decoded: list[Any], fields: list[tuple[str, str]], has_pose: bool, where: str,
+               offset: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     n = len(decoded)
     t = np.empty(n)
-    vals = np.empty((n, len(units), 5))
+    vals = np.empty((n, len(fields)))
     pose = np.empty((n, 3)) if has_pose else None
     for k, m in enumerate(decoded):
         try:
             t[k] = m["t"]
             mu = m["units"]
-            for i, u in enumerate(units):
-                e = mu[u]
-                vals[k, i] = (e["delta"], e["phi_L"], e["phi_R"], e["cur_L"], e["cur_R"])
+            vals[k] = [mu[u][f] for u, f in fields]
             if pose is not None:
                 p = m["pose"]
                 pose[k] = (p["x_b"], p["y_b"], p["theta_b"])
         except KeyError as exc:
             raise InputError(f"{where}: message {offset + k} lacks a log field "
-                             f"({_field(exc)}); every message needs t and delta, phi_L, "
-                             "phi_R, cur_L, cur_R of every unit") from None
+                             f"({_field(exc)}); every message needs {_needs(fields)}") from None
         except (TypeError, ValueError, OverflowError) as exc:
             raise InputError(f"{where}: message {offset + k} "
-                             f"{_json_value_problem(m, units, has_pose, exc)}") from None
+                             f"{_json_value_problem(m, fields, has_pose, exc)}") from None
     return t, vals, pose
 
 
-def _json_value_problem(m: Any, units: list[str], pose: bool, exc: BaseException) -> str:
+def _json_value_problem(m: Any, fields: list[tuple[str, str]], pose: bool,
+                        exc: BaseException) -> str:
     """What is wrong with the first field of JSON message ``m`` that is not a number."""
-    paths = [("t",)] + [("units", u, f) for u in units for f in UNIT_FIELDS] \
+    paths = [("t",)] + [("units", u, f) for u, f in fields] \
         + ([("pose", f) for f in POSE_FIELDS] if pose else [])
     for path in paths:
         v = m
@@ -347,8 +371,8 @@ def _json_value_problem(m: Any, units: list[str], pose: bool, exc: BaseException
             for key in path:
                 v = v[key]
         except (KeyError, TypeError, IndexError):
-            return (f"lacks the log field {'.'.join(path)!r}; every message needs t and delta, "
-                    "phi_L, phi_R, cur_L, cur_R of every unit")
+            return (f"lacks the log field {'.'.join(path)!r}; every message needs "
+                    f"{_needs(fields)}")
         if isinstance(v, int) and not isinstance(v, bool) and abs(v) > _FLOAT_MAX:
             return (f"has a number too large for a float in {'.'.join(path)} ({len(str(v))} "
                     "digits; it overflows to infinity); the log must be finite — repair or cut "
@@ -373,7 +397,7 @@ def _ros2_columns(rows: Rows, decoder: BatchDecoder, platform: Platform, where: 
         return None                                       # short arrays: the loop says so
     vals = np.ascontiguousarray(values[:, :, idx].transpose(0, 2, 1))
     pose = rows.columns["pose"] if rows.columns["pose"].shape[1] == 3 else None
-    return rows.columns["t"], vals, pose
+    return rows.columns["t"], vals.reshape(len(vals), -1), pose
 
 
 def _ros2_loop(decoded: list[Any], platform: Platform, where: str, offset: int
@@ -401,20 +425,19 @@ def _ros2_loop(decoded: list[Any], platform: Platform, where: str, offset: int
             raise InputError(f"{where}: message {offset + k} has arrays shorter than its "
                              f"unit list ({type(exc).__name__}); the message is malformed") \
                 from None
-    return t, vals, pose
+    return t, vals.reshape(n, -1), pose
 
 
 def _checked(t: np.ndarray, vals: np.ndarray, pose: np.ndarray | None, platform: Platform,
              where: str, offset: int, whole: bool) -> Log:
     n = t.shape[0]
-    bad = ~np.isfinite(vals).all(axis=(1, 2)) | ~np.isfinite(t)
+    bad = ~np.isfinite(vals).all(axis=1) | ~np.isfinite(t)
     if pose is not None:
         bad |= ~np.isfinite(pose).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        units = platform.unit_names
-        named = [("t", t[k])] + [(f"units.{u}.{f}", vals[k, i, j]) for i, u in enumerate(units)
-                                 for j, f in enumerate(UNIT_FIELDS)]
+        named = [("t", t[k])] + [(f"units.{u}.{f}", vals[k, j])
+                                 for j, (u, f) in enumerate(platform.layout.fields)]
         if pose is not None:
             named += [(f"pose.{f}", pose[k, j]) for j, f in enumerate(POSE_FIELDS)]
         name, value = next((n, v) for n, v in named if not np.isfinite(v))
@@ -424,12 +447,9 @@ def _checked(t: np.ndarray, vals: np.ndarray, pose: np.ndarray | None, platform:
     if whole and n < MIN_SAMPLES:
         raise InputError(f"{where}: only {n} message{'s' if n != 1 else ''}; at least "
                          f"{MIN_SAMPLES} samples are needed — use a longer log")
-    return Log(t=np.ascontiguousarray(t, dtype=np.float64), units=list(platform.unit_names),
-               delta=np.ascontiguousarray(vals[:, :, 0]),
-               phi=np.ascontiguousarray(vals[:, :, 1:3]),
-               current=np.ascontiguousarray(vals[:, :, 3:5]),
-               pose=None if pose is None else np.ascontiguousarray(pose, dtype=np.float64),
-               source=where)
+    angles, currents = platform.layout.split(np.asarray(vals, dtype=np.float64))
+    return Log(np.ascontiguousarray(t, dtype=np.float64), platform.layout, angles, currents,
+               None if pose is None else np.ascontiguousarray(pose, dtype=np.float64), where)
 
 
 def _field(exc: BaseException) -> str:

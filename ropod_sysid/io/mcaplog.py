@@ -59,7 +59,7 @@ from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.mcapdecode import ContractPieces, Rows
 from ropod_sysid.io.timebase import Gaps, TimeBase, checked_chunks
-from ropod_sysid.platform import Platform
+from ropod_sysid.platform import Layout, Platform
 
 try:  # the compressors mcap uses; their errors mean a broken chunk
     from zstandard import ZstdError
@@ -133,20 +133,22 @@ def new_writer(f: IO[bytes], profile: str = "") -> McapWriter:
     return writer
 
 
-def contract_json_schema(units: list[str], pose: bool) -> dict[str, Any]:
+def contract_json_schema(layout: Layout, pose: bool) -> dict[str, Any]:
     """The JSON schema of one message of our layout (for viewers)."""
     num = {"type": "number"}
-    unit = {
-        "type": "object",
-        "properties": {
-            "delta": {**num, "description": "pivot angle [rad]"},
-            "phi_L": {**num, "description": "left wheel angle [rad], unwrapped"},
-            "phi_R": {**num, "description": "right wheel angle [rad], unwrapped"},
-            "cur_L": {**num, "description": "left motor current [A]"},
-            "cur_R": {**num, "description": "right motor current [A]"},
-        },
-        "required": list(UNIT_FIELDS),
-    }
+    units = list(layout.units)
+    channels: dict[str, list[Any]] = {u: [] for u in units}
+    for ch, i in zip(layout.angle_channels, layout.angle_unit, strict=True):
+        channels[units[i]].append(ch)
+    for ch, i in zip(layout.current_channels, layout.current_unit, strict=True):
+        channels[units[i]].append(ch)
+
+    def unit(u: str) -> dict[str, Any]:
+        return {"type": "object",
+                "properties": {c.field: {**num, "description": f"{c.description} [{c.unit}]"}
+                               for c in channels[u]},
+                "required": [c.field for c in channels[u]]}
+
     schema: dict[str, Any] = {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": CONTRACT_JSON_SCHEMA,
@@ -155,7 +157,7 @@ def contract_json_schema(units: list[str], pose: bool) -> dict[str, Any]:
         "type": "object",
         "properties": {
             "t": {**num, "description": "time [s]"},
-            "units": {"type": "object", "properties": {u: unit for u in units},
+            "units": {"type": "object", "properties": {u: unit(u) for u in units},
                       "required": list(units)},
         },
         "required": ["t", "units"],
@@ -173,21 +175,23 @@ def contract_json_schema(units: list[str], pose: bool) -> dict[str, Any]:
 
 def _write_contract_json(log: Log, f: IO[bytes], topic: str, log_times: list[int]) -> None:
     writer = new_writer(f)
-    units = list(log.units)
+    layout = log.layout
     schema_id = writer.register_schema(
         CONTRACT_JSON_SCHEMA, "jsonschema",
-        json.dumps(contract_json_schema(units, log.pose is not None)).encode())
+        json.dumps(contract_json_schema(layout, log.pose is not None)).encode())
     channel_id = writer.register_channel(topic, "json", schema_id,
                                          {"layout": "ropod_sysid/contract"})
     t = np.asarray(log.t, dtype=np.float64).tolist()
-    per_unit = np.stack([log.delta, log.phi[..., 0], log.phi[..., 1], log.current[..., 0],
-                         log.current[..., 1]], axis=-1).astype(np.float64).tolist()  # N, n, 5
+    cols = log.columns()
+    fields = layout.fields
+    rows = np.column_stack([cols[c] for c in layout.columns()]).astype(np.float64).tolist()
     pose = None if log.pose is None else np.asarray(log.pose, dtype=np.float64).tolist()
     dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=True).encode
     for k, tk in enumerate(t):
-        msg: dict[str, Any] = {"t": tk, "units": {
-            u: dict(zip(UNIT_FIELDS, vals, strict=True))
-            for u, vals in zip(units, per_unit[k], strict=True)}}
+        units: dict[str, dict[str, float]] = {u: {} for u in layout.units}
+        for (u, f), v in zip(fields, rows[k], strict=True):
+            units[u][f] = v
+        msg: dict[str, Any] = {"t": tk, "units": units}
         if pose is not None:
             msg["pose"] = dict(zip(POSE_FIELDS, pose[k], strict=True))
         writer.add_message(channel_id, log_times[k], dumps(msg).encode(), log_times[k], k)
@@ -203,10 +207,15 @@ def _write_contract_ros2(log: Log, f: IO[bytes], topic: str, log_times: list[int
     channel_id = writer.register_channel(topic, "cdr", schema_id,
                                          {"layout": "ropod_sysid/contract"})
     units = list(log.units)
+    if any(ch.field not in ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
+           for ch in (*log.layout.angle_channels, *log.layout.current_channels)):
+        raise InputError(f"{log.source}: the ROS 2 layout of ropod-sysid carries smart-wheel "
+                         "(swivel) units only; write JSON MCAP or CSV for this platform")
     t = np.asarray(log.t, dtype=np.float64).tolist()
-    cols = [np.asarray(a, dtype=np.float64).tolist() for a in
-            (log.delta, log.phi[..., 0], log.phi[..., 1], log.current[..., 0],
-             log.current[..., 1])]
+    by_name = log.columns()
+    cols = [np.column_stack([by_name[f"{prefix}_{u}{side}"] for u in units]).tolist()
+            for prefix, side in (("delta", ""), ("phi", "L"), ("phi", "R"), ("cur", "L"),
+                                 ("cur", "R"))]
     pose = None if log.pose is None else np.asarray(log.pose, dtype=np.float64).tolist()
     for k, tk in enumerate(t):
         msg = {"t": tk, "units": units, "delta": cols[0][k], "phi_l": cols[1][k],

@@ -36,7 +36,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -46,7 +46,8 @@ import yaml
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_write_text
-from ropod_sysid.params import parameter_names
+from ropod_sysid.model.units.swivel import check_all_swivel
+from ropod_sysid.params import known_names, name_summary
 from ropod_sysid.platform import Platform
 from ropod_sysid.yamlload import safe_load
 
@@ -189,12 +190,17 @@ def write_parameter_file(pf: ParameterFile, path: str | Path, fmt: Format = "jso
 
 
 def _geometry(platform: Platform) -> dict[str, Any]:
-    kin: dict[str, Any] = {"d_w": float(platform.wheel_distance),
-                           "s_w": float(platform.caster_offset)}
-    n = platform.n_units
+    """The base's kinematic model: the ropod controller's keys for a smart-wheel platform,
+    else the platform file's unit entries."""
+    if set(platform.types) != {"swivel"}:
+        return {"units": [u.to_entry({}) for u in platform.units],
+                "unit_names": list(platform.unit_names)}
+    first = platform.units[0]
+    kin: dict[str, Any] = {"d_w": float(first.wheel_distance),
+                           "s_w": float(first.caster_offset)}
     for side in ("L", "R"):
-        for i in range(n):
-            kin[f"r_w{side}_SW{i + 1}"] = float(platform.wheel_radius)
+        for i, u in enumerate(platform.units):
+            kin[f"r_w{side}_SW{i + 1}"] = float(u.wheel_radius)
     for axis, c in (("x", 0), ("y", 1)):
         for i, u in enumerate(platform.units):
             kin[f"{axis}pos_SW{i + 1}"] = float(u.pivot[c])
@@ -223,9 +229,11 @@ def _ros2_dict(pf: ParameterFile, platform: Platform, node_name: str) -> dict[st
 
 
 def _kelo_dict(pf: ParameterFile, platform: Platform) -> dict[str, Any]:
+    check_all_swivel(platform, "the KELO format")
+    first = platform.units[0]
     data: dict[str, Any] = {
-        "wheel_distance": float(platform.wheel_distance),
-        "wheel_diameter": 2.0 * float(platform.wheel_radius),
+        "wheel_distance": float(first.wheel_distance),
+        "wheel_diameter": 2.0 * float(first.wheel_radius),
         "num_wheels": platform.n_units,
     }
     for i, u in enumerate(platform.units):
@@ -280,12 +288,12 @@ def read_parameter_file(path: str | Path) -> ParameterFile:
     return ParameterFile.from_dict(data, where)
 
 
-def read_truth_parameters(path: str | Path, units: Sequence[str]) -> dict[str, float]:
+def read_truth_parameters(path: str | Path, platform: Platform) -> dict[str, float]:
     """name → value from a parameter file (json/yaml/ros2) or a flat mapping name → number.
 
-    Names must be parameter names for ``units`` (per-wheel or shared friction names; see
-    :func:`ropod_sysid.params.parameter_names`). A flat mapping may also carry a ``platform``
-    name, which is ignored. Parameters not given are left out (the caller decides defaults).
+    Names must be parameter names of the platform (per-wheel, shared or body-axis friction
+    names; see :func:`ropod_sysid.params.parameter_names`). A flat mapping may also carry a
+    ``platform`` name, which is ignored. Parameters not given are left out (the caller decides defaults).
     """
     where = str(path)
     data = _load_mapping(Path(path), where, "parameter file")
@@ -305,15 +313,13 @@ def read_truth_parameters(path: str | Path, units: Sequence[str]) -> dict[str, f
     else:
         raise InputError(f"{where}: expected a mapping name → number (like m_b: 35.1) or a "
                          "parameter file")
-    known = set(parameter_names(units, "per-wheel")) | set(parameter_names(units, "shared"))
+    known = set(known_names(platform))
     out: dict[str, float] = {}
     for name, entry in raw.items():
         key = f"{prefix}{name}"
         if str(name) not in known:
             raise InputError(
-                f"{where}: unknown parameter '{name}'; known names are m_b, Jzz_b, m_wh, "
-                f"Jzz_wh, Jrot_w, fwv_<u>L/R, fwc_<u>L/R, fpv_<u>, fpc_<u> for units "
-                f"{', '.join(units)}, or shared fwv, fwc, fpv, fpc"
+                f"{where}: unknown parameter '{name}'; known names are {name_summary(platform)}"
             )
         if isinstance(entry, dict):
             if "value" not in entry:

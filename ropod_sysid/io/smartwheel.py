@@ -65,6 +65,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.atomic import atomic_path
 from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.timebase import Gaps, check_times
+from ropod_sysid.model.units import swivel
 from ropod_sysid.platform import Platform
 
 SW_TOPIC = "/sw_ethercat_parser/data"
@@ -415,7 +416,9 @@ def raw_frames(log: Log, platform: Platform, *, t0_ns: int = DEFAULT_EPOCH_NS,
                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The smart-wheel fields of ``log`` as the drives would send them: field → (N', n) arrays
     and the (N',) receive times [ns]; see :func:`write_smartwheel` for the options."""
+    swivel.check_all_swivel(platform, "the smart-wheel layout")
     units = list(platform.unit_names)
+    delta, phi, current = swivel.arrays(log)
     if list(log.units) != units:
         raise InputError(f"{log.source}: the log's units {', '.join(log.units)} differ from the "
                          f"platform's {', '.join(units)}")
@@ -436,9 +439,9 @@ def raw_frames(log: Log, platform: Platform, *, t0_ns: int = DEFAULT_EPOCH_NS,
     f["voltage_bus"][:] = voltage
     for i, u in enumerate(platform.units):
         lm, rm = u.left_motor, 3 - u.left_motor
-        raw_l = u.sign_left * log.phi[:, i, 0]
-        raw_r = u.sign_right * log.phi[:, i, 1]
-        pivot = log.delta[:, i] + u.pivot_offset
+        raw_l = u.sign_left * phi[:, i, 0]
+        raw_r = u.sign_right * phi[:, i, 1]
+        pivot = delta[:, i] + u.pivot_offset
         f[f"encoder_{lm}"][:, i] = _wrap(raw_l, wrap)
         f[f"encoder_{rm}"][:, i] = _wrap(raw_r, wrap)
         f["encoder_pivot"][:, i] = _wrap(pivot, wrap_pivot)
@@ -446,8 +449,8 @@ def raw_frames(log: Log, platform: Platform, *, t0_ns: int = DEFAULT_EPOCH_NS,
             f[f"velocity_{lm}"][:, i] = np.gradient(raw_l, t)
             f[f"velocity_{rm}"][:, i] = np.gradient(raw_r, t)
             f["velocity_pivot"][:, i] = np.gradient(pivot, t)
-        f[f"current_{lm}_q"][:, i] = u.sign_left * log.current[:, i, 0]
-        f[f"current_{rm}_q"][:, i] = u.sign_right * log.current[:, i, 1]
+        f[f"current_{lm}_q"][:, i] = u.sign_left * current[:, i, 0]
+        f[f"current_{rm}_q"][:, i] = u.sign_right * current[:, i, 1]
     if decimals is not None:
         for name in FLOAT_FIELDS:
             f[name] = np.round(f[name], decimals)

@@ -27,6 +27,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.cdr import struct_array_layout
 from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.mcapdecode import BatchDecoder, Rows, ros2_decoder
+from ropod_sysid.model.units import swivel
 from ropod_sysid.odometry import unwrap_from
 from ropod_sysid.platform import Platform
 
@@ -205,8 +206,7 @@ class FrameChecks:
             d = enc["encoder_pivot"][:, i] - u.pivot_offset
             d -= self.branch[i]
             delta[:, i] = d
-        return Log(t=t, units=self.platform.unit_names, delta=delta, phi=phi, current=cur,
-                   pose=None, source=self.where)
+        return swivel.from_arrays(self.platform, t, delta, phi, cur, None, self.where)
 
     def _unwrap(self, name: str, x: np.ndarray) -> np.ndarray:
         """np.unwrap along the frames, continued from the previous piece."""

@@ -1,7 +1,8 @@
-"""The modular dynamic model: the base (:mod:`.base`), wheel units (:mod:`.swivel`) and their
-sum (:mod:`.assembly`)."""
+"""The modular dynamic model: the base (:mod:`.base`), the wheel-unit types (:mod:`.units`:
+:mod:`.units.swivel`, :mod:`.units.omni`) and their sum (:mod:`.assembly`)."""
 
 from ropod_sysid.model.assembly import DirectEOM, PlatformModel, State
-from ropod_sysid.model.swivel import SwivelUnits
+from ropod_sysid.model.units.omni import OmniUnits
+from ropod_sysid.model.units.swivel import SwivelUnits
 
-__all__ = ["DirectEOM", "PlatformModel", "State", "SwivelUnits"]
+__all__ = ["DirectEOM", "OmniUnits", "PlatformModel", "State", "SwivelUnits"]

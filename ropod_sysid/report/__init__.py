@@ -46,6 +46,7 @@ from ropod_sysid.io import check_distinct
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
+from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
     UNITS_OF,
@@ -93,7 +94,7 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     stds = pfile.stds()
     notes: list[str] = []
     friction, values = parameters_of(pfile, platform, where)
-    names = parameter_names(platform.unit_names, friction)
+    names = parameter_names(platform, friction)
     file_span, delay, row_step = fit_settings(pfile, where)
     span = span if span is not None else file_span
     fixed = {k: values[k] for k in names
@@ -212,7 +213,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
     platform = result.platform
     opts = result.options
     views, errs, vels = [], [], []
-    fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.unit_names)
+    fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.layout)
     for k, lf in enumerate(result.logs):
         plot = lf.plot
         if plot is None:
@@ -310,7 +311,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     if logs is not None and len(logs) != len(result.logs):
         raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
                          f"{len(logs)}")
-    compare_pf, compare_label = read_comparison(compare, compare_label, result.platform.unit_names)
+    compare_pf, compare_label = read_comparison(compare, compare_label, result.platform)
     platform = result.platform
     sol = result.solution
     physical = result.physical is not None
@@ -350,7 +351,9 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "version": __version__,
         "platform": {"name": platform.name, "source": platform.source,
                      "units": platform.unit_names, "n_units": platform.n_units,
-                     "torque_constant": platform.torque_constant},
+                     "types": platform.types,
+                     "unit_table": [row for g in PlatformModel(platform).groups
+                                    for row in g[1].unit_table()]},
         "logs": log_views,
         "samples": int(sum(v["samples"] for v in log_views)),
         "correlation": mean_correlation([lf.triangles for lf in result.logs]),
@@ -389,7 +392,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
 
 
 def read_comparison(compare: str | Path | ParameterFile | None, label: str | None,
-                    units: Sequence[str]) -> tuple[ParameterFile | None, str | None]:
+                    platform: Platform) -> tuple[ParameterFile | None, str | None]:
     """The parameter file to show beside the fit: a fit's parameter file, or a flat
     name → value mapping such as a simulation's truth."""
     if compare is None:
@@ -400,7 +403,7 @@ def read_comparison(compare: str | Path | ParameterFile | None, label: str | Non
         pfile = read_parameter_file(compare)
     except InputError as exc:
         try:
-            values = read_truth_parameters(compare, units)
+            values = read_truth_parameters(compare, platform)
         except InputError:
             raise exc from None
         pfile = ParameterFile("", {k: {"value": v, "std": None} for k, v in values.items()},

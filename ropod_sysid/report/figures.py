@@ -21,6 +21,7 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator, NullLocator
 
 if TYPE_CHECKING:
+    from ropod_sysid.platform import Layout
     from ropod_sysid.plotdata import LogPlot
 
 MAX_POINTS = 2000
@@ -225,11 +226,16 @@ def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray,
 
 
 class InputsFigure:
-    """The inputs of one log: base path (x–y), base velocities, pivot angles, wheel torques,
-    from their min/max envelopes (:class:`ropod_sysid.plotdata.LogPlot`); built once for the
-    platform's units and redrawn per log (see :class:`FitFigure`)."""
+    """The inputs of one log: base path (x–y), base velocities, the units' turning angles
+    (swivel pivots: the wrapped angle channels), actuator torques, from their min/max envelopes
+    (:class:`ropod_sysid.plotdata.LogPlot`); built once for the platform's layout and redrawn
+    per log (see :class:`FitFigure`)."""
 
-    def __init__(self, units: Sequence[str]) -> None:
+    def __init__(self, layout: Layout) -> None:
+        units = list(layout.units)
+        turning = [(int(i), name) for name, i, w in zip(layout.angle_names, layout.angle_unit,
+                                                       layout.wrapped, strict=True) if w]
+        actuators = list(zip(layout.current_unit, layout.current_channels, strict=True))
         with _style():
             fig = _figure(10.0, 6.4, top=0.95, bottom=0.08, left=0.065, right=0.99)
             gs = fig.add_gridspec(2, 2, wspace=0.2, hspace=0.32)
@@ -251,23 +257,33 @@ class InputsFigure:
             ax_vel.set_xlabel("t [s]")
             _title(ax_vel, "base velocities")
             _legend_above(ax_vel, ncols=3)
-            self.piv = [ax_piv.plot([], [], color=PALETTE[i % len(PALETTE)], label=f"δ {u}")[0]
-                        for i, u in enumerate(units)]
+            self.piv = [ax_piv.plot([], [], color=PALETTE[i % len(PALETTE)], label=name)[0]
+                        for i, name in turning]
             ax_piv.set_xlabel("t [s]")
             ax_piv.set_ylabel("[deg]")
-            _title(ax_piv, "pivot angles")
-            _legend_above(ax_piv, ncols=min(len(units), 8))
+            _title(ax_piv, "turning angles" if turning else "turning angles (none: fixed "
+                   "wheels)")
+            if turning:
+                _legend_above(ax_piv, ncols=min(len(turning), 8))
             handles, self.tau = [], []
-            for i, u in enumerate(units):
-                col = PALETTE[i % len(PALETTE)]
-                self.tau += [ax_tau.plot([], [], color=col, lw=0.8)[0],
-                             ax_tau.plot([], [], color=col, lw=0.8, ls="--")[0]]
-                handles.append(Line2D([], [], color=col, label=str(u)))
-            handles += [Line2D([], [], color="#333", label="L"),
-                        Line2D([], [], color="#333", ls="--", label="R")]
+            styles = ("-", "--", ":", "-.")
+            seen: dict[int, int] = {}
+            kinds: dict[int, str] = {}
+            for i, ch in actuators:
+                j = seen.get(int(i), 0)
+                seen[int(i)] = j + 1
+                kinds.setdefault(j, ch.field)
+                self.tau.append(ax_tau.plot([], [], color=PALETTE[int(i) % len(PALETTE)],
+                                            lw=0.8, ls=styles[j % len(styles)])[0])
+            handles = [Line2D([], [], color=PALETTE[i % len(PALETTE)], label=str(u))
+                       for i, u in enumerate(units)]
+            if len(kinds) > 1:
+                handles += [Line2D([], [], color="#333", ls=styles[j % len(styles)],
+                                   label=f.removeprefix("cur_").removeprefix("cur"))
+                            for j, f in kinds.items()]
             ax_tau.set_xlabel("t [s]")
             ax_tau.set_ylabel("[N m]")
-            _title(ax_tau, "wheel torques")
+            _title(ax_tau, "actuator torques")
             _legend_above(ax_tau, handles=handles, ncols=min(len(handles), 8))
             for ax in (ax_vel, ax_piv, ax_tau):
                 ax.xaxis.set_major_locator(MaxNLocator(6))
@@ -288,9 +304,9 @@ class InputsFigure:
         return _redraw(self.fig, self.axes)
 
 
-def inputs(plot: LogPlot, units: Sequence[str]) -> bytes:
+def inputs(plot: LogPlot, layout: Layout) -> bytes:
     """:class:`InputsFigure` of one log."""
-    return InputsFigure(units).render(plot)
+    return InputsFigure(layout).render(plot)
 
 
 def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:

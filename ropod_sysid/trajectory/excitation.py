@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.model.units.swivel import angles_of, check_all_swivel
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.fourier import FourierFamily, _scaled_twist
 from ropod_sysid.trajectory.identifiability import _world_motion, conditioning
@@ -77,8 +78,9 @@ class _Objective:
 
         self.platform = platform
         self.model = PlatformModel(platform)
-        self.pivots = platform.pivots
-        self.s_w = platform.caster_offset
+        check_all_swivel(platform, "trajectory optimize")
+        self.pivots = platform.positions
+        self.s_w = platform.units[0].caster_offset
         self.limits = limits
         self.floor = floor
         self.objective = objective
@@ -142,7 +144,7 @@ class _Objective:
         # pivot rates from the constraint (eq. 8a) at the quasi-steady angles: consistent
         # kinematics, so the structural rank deficiency shows exactly
         st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, 3),
-                              delta[:, :, idx].reshape(-1, n_u))
+                              angles_of(delta[:, :, idx].reshape(-1, n_u)))
         a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, 3),
                                 self.friction)  # type: ignore[arg-type]
         a = a.reshape(n_s, -1, a.shape[-1])
@@ -242,7 +244,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
             callback=callback)
     fine_t = np.linspace(0.0, duration, int(round(duration / dt)) + 1)
     fam = FourierFamily(duration, harmonics, fine_t,
-                        float(np.linalg.norm(platform.pivots, axis=1).max()),
+                        float(np.linalg.norm(platform.positions, axis=1).max()),
                         limits.pivot_rate_max or 1.5)
     notes: list[str] = []
     why_first = ""

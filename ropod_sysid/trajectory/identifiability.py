@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ropod_sysid.model.units.swivel import angles_of
 from ropod_sysid.trajectory.setpoints import integrate_pose
 
 
@@ -42,7 +43,7 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
     out = []
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
-        st = model.state(q[sl], qd[sl], delta[sl])  # type: ignore[attr-defined]
+        st = model.state(q[sl], qd[sl], angles_of(delta[sl]))  # type: ignore[attr-defined]
         out.append(model.a_id_ext(st, qdd[sl], friction))  # type: ignore[attr-defined]
     return np.concatenate(out, axis=0)
 

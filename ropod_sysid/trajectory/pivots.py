@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ropod_sysid.model.units.swivel import check_all_swivel
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.run_variants import variants
 from ropod_sysid.trajectory.setpoints import Trajectory, _fine
@@ -77,9 +78,10 @@ def predict_pivots(t: np.ndarray, twists: np.ndarray, platform: Platform,
     if single:
         tw = tw[None]
     n_var, n, _ = tw.shape
-    pivots = platform.pivots
+    check_all_swivel(platform, "the pivot prediction")
+    pivots = platform.positions
     k = len(pivots)
-    s_w = platform.caster_offset
+    s_w = platform.units[0].caster_offset
     if delta0 is None:
         d = np.stack([trailing_pivots(tw[v], pivots) for v in range(n_var)])
     else:

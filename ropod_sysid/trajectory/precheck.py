@@ -285,12 +285,12 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
                         qdd[:, idx].reshape(-1, 3),
                         pred.delta[:, idx].reshape(n_var * idx.size, -1), friction)
     cond = conditioning(a)
-    names = parameter_names(platform.unit_names, friction)  # type: ignore[arg-type]
+    names = parameter_names(platform, friction)  # type: ignore[arg-type]
     if params is None:
         truth = thesis_fixed_masses(platform.unit_names)
     else:
-        truth = DynamicParameters.from_mapping(params, platform.unit_names, "parameters")
-    true_values = truth.vector(platform.unit_names, friction)  # type: ignore[arg-type]
+        truth = DynamicParameters.from_mapping(params, platform, "parameters")
+    true_values = truth.vector(names)
     dt_eval = step * float(np.median(np.diff(fine.t)))
     std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -317,7 +317,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         raise InputError(f"dt must be in (0, 0.1] s, got {dt!r}")
     if platform is None:
         platform = ropod_platform()
-    pivots = platform.pivots if pivot_rate_max is not None else None
+    pivots = platform.positions if pivot_rate_max is not None else None
     rng = np.random.default_rng(seed)
     jitter = 1.0 if seed == 0 else float(rng.uniform(0.9, 1.1))
     order = list(LOBES)

@@ -5,71 +5,115 @@ A unit type is one module; nothing outside it names its joints. It declares (see
 
 - its platform-file entry: the keys, their defaults and validation (:meth:`UnitType.parse_entry`,
   one-line :class:`~ropod_sysid.errors.InputError` messages naming the unit, the key and the fix);
-- its log channels, column names and units (:meth:`UnitType.channels`);
-- its parameter names: inertial (shared by all units of the type) and friction, per wheel,
-  shared or per body axis (:attr:`UnitType.inertial_names`, :meth:`UnitType.friction_names`);
+- its log channels, column names and units (:attr:`UnitType.angles`, :attr:`UnitType.currents`):
+  per unit first its encoder angles, then its motor currents;
+- its parameter names: inertial (shared by all units of the type) and friction, per wheel or
+  shared (:attr:`UnitType.inertial_names`, :meth:`UnitType.friction_names`);
 - its constraint rows, linear in the base twist, from its measured joint rates: wheel odometry of
   any mix of types is one least-squares solve over the rows of all units
-  (:meth:`UnitType.constraint_rows`);
+  (:meth:`UnitType.normal_equations`);
 - its contributions to the direct equations of motion (thesis eq. 65)
   M_dir q̈_b = B_Fb F_b + B_τ (τ + τ_f) + b_dir: M_add and b_dir (:meth:`UnitType.mass_terms`),
-  the actuator input matrix (``data.b_tau``), the friction torques and the columns of A_ID,ext
-  (eq. 66) for its inertial and friction parameters (:meth:`UnitType.a_id`,
+  the actuator input matrix (``data.b_tau``), the friction torques and forces and the columns of
+  A_ID,ext (eq. 66) for its inertial and friction parameters (:meth:`UnitType.a_id`,
   :meth:`UnitType.friction_columns`);
 - its actuator rates for a base twist: the simulator's model-free controller and the trajectory
-  check's joint-rate limits (:meth:`UnitType.actuator_rates`);
+  check's joint-rate limits (:meth:`UnitType.actuator_rates`), and the rates of all its angles
+  that the simulator integrates (:meth:`UnitType.angle_rates`);
 - the per-unit quantities the report and ``inspect`` show (:meth:`UnitType.unit_table`,
   :meth:`UnitType.quantities`).
 
-A group object holds k units of one type and is vectorised over samples N and its units.
-Parameters are passed by name (a mapping name → value), so that a type owns its names.
+A *group* object holds k units of one type that share their geometry, and is vectorised over
+samples N and its units. Its angles arrive as an (N, k·a) array, unit-major (the a angle
+channels of unit 1, then of unit 2 …), its currents and torques as (N, k·m). Parameters are
+passed by name (a mapping name → value), so that a type owns its names.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
 
 FrictionVariant = Literal["per-wheel", "shared", "body"]
+FRICTION_VARIANTS: tuple[str, ...] = ("per-wheel", "shared", "body")
 
 
 @dataclass(frozen=True)
 class Channel:
-    """One log column of a unit: its name (``phi_3``), SI unit and meaning."""
+    """One log channel of a unit type.
 
-    name: str
+    ``template`` is the CSV column with ``{u}`` for the unit name (``phi_{u}L``); ``field`` the
+    key of the unit's entry in a JSON MCAP message (``phi_L``); ``wrapped`` marks an angle that
+    may be logged modulo 2π (a pivot or steering angle) and is unwrapped before smoothing.
+    """
+
+    template: str
+    field: str
     unit: str
     description: str
+    wrapped: bool = False
+
+    def column(self, unit: str) -> str:
+        """The CSV column of this channel for the unit named ``unit``."""
+        return self.template.format(u=unit)
+
+
+class UnitSpec(Protocol):
+    """One unit as its platform-file entry describes it."""
+
+    name: str
+    type: str
+
+    @property
+    def position(self) -> tuple[float, float]:
+        """Attachment point in the base frame [m]."""
+        ...
+
+    def to_entry(self, defaults: Mapping[str, Any]) -> dict[str, Any]:
+        """The platform-file entry (keys equal to the platform-wide ``defaults`` left out)."""
+        ...
 
 
 class UnitData(Protocol):
-    """Per-sample kinematics of a group; ``b_tau`` is (N, 3, m) over its m actuators."""
+    """Per-sample kinematics of a group (pinocchio's "data")."""
 
-    b_tau: np.ndarray
+    b_tau: np.ndarray  # (N, 3, k·m) actuator input matrix B_τ
+    angle_rate: np.ndarray  # (N, k·a) rates of the unit angles
+    actuator_rate: np.ndarray  # (N, k·m) rates of the actuated joints
 
 
 class UnitType(Protocol):
     """A wheel-unit type: declarations (class level) and a group of k units (instance)."""
 
-    type_name: str  # the platform file's ``type:``
-    entry_keys: tuple[str, ...]  # keys a unit entry of this type may carry
-    inertial_names: tuple[str, ...]  # inertial parameters, shared by the units of the type
-    parameter_units: Mapping[str, str]  # SI unit of each parameter family
+    type_name: ClassVar[str]  # the platform file's ``type:``
+    angles: ClassVar[tuple[Channel, ...]]  # encoder channels per unit
+    currents: ClassVar[tuple[Channel, ...]]  # motor-current channels per unit (one per actuator)
+    platform_keys: ClassVar[tuple[str, ...]]  # platform-wide keys an entry may override
+    inertial_names: ClassVar[tuple[str, ...]]  # inertial parameters, shared by the type's units
+    parameter_info: ClassVar[Mapping[str, tuple[str, str]]]  # family → (SI unit, description)
+    friction_signs: ClassVar[Mapping[str, int]]  # friction family → sign when dissipative
+
     n_units: int
     names: list[str]
 
     @classmethod
-    def parse_entry(cls, entry: Any, k: int, where: str, defaults: Mapping[str, float]) -> Any:
+    def parse_entry(cls, entry: Mapping[str, Any], k: int, where: str,
+                    defaults: Mapping[str, float]) -> UnitSpec:
         """Validate ``units[k]`` of the platform file ``where``; ``defaults`` are the
         platform-wide keys the entry may override."""
         ...
 
-    @staticmethod
-    def channels(unit: str) -> tuple[Channel, ...]:
-        """Log columns of the unit named ``unit``."""
+    @classmethod
+    def group_key(cls, spec: Any) -> Hashable:
+        """Units with equal keys share one group (their common geometry)."""
+        ...
+
+    @classmethod
+    def from_specs(cls, specs: Sequence[Any], friction_tanh_gain: float) -> UnitType:
+        """The group of these units."""
         ...
 
     @staticmethod
@@ -78,22 +122,36 @@ class UnitType(Protocol):
         """Friction parameter names for the units, ordered as :meth:`friction_columns`."""
         ...
 
-    def kinematics(self, q: np.ndarray, qd: np.ndarray,
-                   joint_rates: np.ndarray | None = None) -> UnitData:
+    @classmethod
+    def typical_parameters(cls, units: Sequence[str]) -> dict[str, float]:
+        """Plausible inertial and per-wheel friction values (to simulate with)."""
+        ...
+
+    def normal_equations(self, angles: np.ndarray, increments: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """AᵀA (N, 3, 3), Aᵀb (N, 3) of the constraint rows A ν = b in the base-frame twist
+        ν = (v_x, v_y, ω), at the angles (N, k·a) for their rates or increments."""
+        ...
+
+    def kinematics(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
+                   angle_rates: np.ndarray | None = None) -> UnitData:
         """Per-sample kinematics for base pose q and twist qd (N, 3), world coordinates."""
         ...
 
-    def constraint_rows(self, q: np.ndarray,
-                        joint_rates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(A (N, r, 3), b (N, r)) with A q̇_b = b from the measured joint rates."""
+    def angle_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """Rates (N, k·a) of the unit angles implied by the base motion."""
         ...
 
-    def actuator_rates(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Actuator rates (N, m) the base twist asks for (inverse kinematics)."""
+    def actuator_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """Actuator rates (N, k·m) the base twist asks for (inverse kinematics)."""
         ...
 
-    def torques(self, currents: np.ndarray) -> np.ndarray:
-        """Actuator torques (N, m) from the motor currents (N, m)."""
+    def torque_constants(self) -> np.ndarray:
+        """Torque per motor current of each actuator (k·m,) [N m/A]."""
+        ...
+
+    def initial_angles(self, twist: np.ndarray) -> np.ndarray:
+        """Unit angles (k·a,) at rest before a first motion with base-frame twist (3,)."""
         ...
 
     def mass_terms(self, data: Any,
@@ -107,7 +165,12 @@ class UnitType(Protocol):
 
     def friction_torques(self, data: Any, params: Mapping[str, float],
                          variant: FrictionVariant = "per-wheel") -> np.ndarray:
-        """Friction torques (N, m), added to the actuator torques through ``b_tau``."""
+        """Friction torques (N, k·m), added to the actuator torques through ``b_tau``."""
+        ...
+
+    def friction_force(self, data: Any, params: Mapping[str, float],
+                       variant: FrictionVariant = "per-wheel") -> np.ndarray | None:
+        """Generalized friction force (N, 3) of unactuated joints (None: none)."""
         ...
 
     def friction_columns(self, data: Any, variant: FrictionVariant = "per-wheel"
@@ -129,10 +192,24 @@ class UnitType(Protocol):
         ...
 
 
-# The registry of unit types by their platform-file ``type:`` name. Imported last: a type's module
-# imports Channel and FrictionVariant from here. ``swivel``
-# (:class:`~ropod_sysid.model.swivel.SwivelUnits`) still has the older interface of
-# :mod:`ropod_sysid.model.unit` and is listed in ``model.assembly.UNIT_TYPES``.
-from ropod_sysid.model.units.omni import OmniUnits  # noqa: E402
+def check_variant(variant: str) -> str:
+    """A friction variant name, else a one-line error."""
+    from ropod_sysid.errors import InputError
 
-UNIT_TYPES: dict[str, type[UnitType]] = {OmniUnits.type_name: OmniUnits}
+    if variant not in FRICTION_VARIANTS:
+        raise InputError(f"unknown friction model {variant!r}; use per-wheel, shared or body")
+    return variant
+
+
+def unit_major(values: np.ndarray, per_unit: int) -> np.ndarray:
+    """(N, k·a) → (N, k, a) view of a group's channels."""
+    values = np.asarray(values, float)
+    return values.reshape(values.shape[0], -1, per_unit)
+
+
+# The registry of unit types by their platform-file ``type:`` name. Imported last: a type's module
+# imports Channel and FrictionVariant from here.
+from ropod_sysid.model.units.omni import OmniUnits  # noqa: E402
+from ropod_sysid.model.units.swivel import SwivelUnits  # noqa: E402
+
+UNIT_TYPES: dict[str, Any] = {cls.type_name: cls for cls in (SwivelUnits, OmniUnits)}

@@ -48,26 +48,22 @@ this model works in world coordinates, where they cannot be lost.
 
 Friction. Per wheel (like the ropod's roll friction, eq. 57 of the thesis) the friction torque
 τ_f,i = f_ov,i φ̇_i + f_oc,i tanh(α φ̇_i) is added to the motor torque and enters through B_τ;
-dissipative friction has f_ov, f_oc ≤ 0. Per body axis (004 eqs. 6–8: B_v, B_vn, B_ω, C_v, C_vn,
-C_ω) the friction force in the base frame F_f = f_bv ⊙ ν + f_bc ⊙ tanh(α ν), ν = (v, v_n, ω),
-enters through B_Fb (thesis eq. 3); f_bv = −(B_v, B_vn, B_ω), f_bc = −(C_v, C_vn, C_ω).
+dissipative friction has f_ov, f_oc ≤ 0. Per body axis as 004 eqs. 6–8 model it, the friction
+acts on the base (:func:`ropod_sysid.model.base.body_friction_force`) and the wheels have none.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.model import base
-from ropod_sysid.model.units import Channel, FrictionVariant
-from ropod_sysid.platform import UNIT_NAME, _number
-
-BODY_FRICTION = ("fbv_x", "fbv_y", "fbv_w", "fbc_x", "fbc_y", "fbc_w")
+from ropod_sysid.model.units import Channel, FrictionVariant, check_variant
+from ropod_sysid.model.units.entry import check_keys, number, point, resolved, unit_name
 
 
 @dataclass(frozen=True)
@@ -79,6 +75,20 @@ class OmniSpec:
     heading: float  # a_i [rad]
     wheel_radius: float  # r_i [m]
     torque_constant: float  # k_t,i [N m/A], gearing included (004 eq. 13: l K_t)
+    type: str = "omni"
+
+    def moved(self, position: Sequence[float]) -> OmniSpec:
+        """The same unit attached at ``position`` [m]."""
+        return replace(self, position=(float(position[0]), float(position[1])))
+
+    def to_entry(self, defaults: Mapping[str, Any]) -> dict[str, Any]:
+        d: dict[str, Any] = {"name": self.name, "type": self.type,
+                             "position": [self.position[0], self.position[1]],
+                             "heading": self.heading}
+        for key in ("wheel_radius", "torque_constant"):
+            if getattr(self, key) != defaults.get(key):
+                d[key] = getattr(self, key)
+        return d
 
 
 @dataclass
@@ -96,30 +106,30 @@ class OmniData:
         """B_τ = [J_1ᵀ … J_kᵀ] (O3); shape (N, 3, k)."""
         return np.swapaxes(self.jac, 1, 2)
 
+    @property
+    def angle_rate(self) -> np.ndarray:
+        return self.wheel_rate
 
-def _variant(variant: str) -> str:
-    if variant not in ("per-wheel", "shared", "body"):
-        raise InputError(f"unknown friction model {variant!r}; use per-wheel, shared or body")
-    return variant
-
-
-def _entry_number(entry: Mapping[str, Any], key: str, where: str, default: float | None,
-                  positive: bool = False) -> float:
-    value = _number(dict(entry), key, where, default)
-    if positive and value <= 0:
-        raise InputError(f"{where}: key '{key}' must be > 0, got {value}")
-    return value
+    @property
+    def actuator_rate(self) -> np.ndarray:
+        return self.wheel_rate
 
 
 class OmniUnits:
     """k omni wheels of seed 004, fixed to the base: the ``omni`` unit type."""
 
     type_name = "omni"
+    angles = (Channel("phi_{u}", "phi", "rad", "wheel encoder angle, unwrapped"),)
+    currents = (Channel("cur_{u}", "cur", "A", "motor current"),)
+    platform_keys = ("wheel_radius", "torque_constant")
     entry_keys = ("name", "type", "position", "heading", "wheel_radius", "torque_constant")
     inertial_names = ("Jrot_o",)
-    parameter_units = {"Jrot_o": "kg m²", "fov": "N m s/rad", "foc": "N m",
-                       "fbv_x": "N s/m", "fbv_y": "N s/m", "fbv_w": "N m s/rad",
-                       "fbc_x": "N", "fbc_y": "N", "fbc_w": "N m"}
+    parameter_info = {
+        "Jrot_o": ("kg m²", "omni wheel + rotor inertia about the axle"),
+        "fov": ("N m s/rad", "viscous omni-wheel friction"),
+        "foc": ("N m", "Coulomb omni-wheel friction"),
+    }
+    friction_signs = {"fov": -1, "foc": -1}  # of dissipative friction (added to the torque)
 
     def __init__(self, specs: Sequence[OmniSpec], friction_tanh_gain: float = 10.0) -> None:
         self.specs = tuple(specs)
@@ -135,75 +145,72 @@ class OmniUnits:
 
     # ------------------------------------------------------------ declaration
     @classmethod
-    def parse_entry(cls, entry: Any, k: int, where: str,
+    def parse_entry(cls, entry: Mapping[str, Any], k: int, where: str,
                     defaults: Mapping[str, float]) -> OmniSpec:
         """Validate the platform-file entry ``units[k]`` of an omni unit; one-line errors.
 
         ``defaults`` holds the platform-wide ``wheel_radius`` and ``torque_constant`` that the
         entry may override.
         """
-        if not isinstance(entry, Mapping) or "name" not in entry:
-            raise InputError(f"{where}: 'units[{k}]' must be a mapping like {{name: \"1\", "
-                             "type: omni, position: [x, y], heading: a}")
-        name = str(entry["name"])
-        if not UNIT_NAME.match(name):
-            raise InputError(f"{where}: 'units[{k}].name' is {name!r}; use letters, digits and "
-                             "underscores only")
+        name = unit_name(entry, k, where, '{name: "1", type: omni, position: [x, y], '
+                                          'heading: a}')
         at = f"{where}: 'units[{k}]' (unit '{name}')"
-        unknown = sorted(set(map(str, entry)) - set(cls.entry_keys))
-        if unknown:
-            raise InputError(f"{at}: unknown key '{unknown[0]}' for type omni; known keys: "
-                             f"{', '.join(cls.entry_keys)}")
-        pos = entry.get("position")
-        if (not isinstance(pos, list | tuple) or len(pos) != 2
-                or not all(isinstance(p, int | float) and not isinstance(p, bool)
-                           and math.isfinite(float(p)) for p in pos)):
-            raise InputError(f"{at}: key 'position' must be two finite numbers [x, y] in "
-                             "metres (the wheel centre in the base frame)")
+        check_keys(entry, cls.entry_keys, at, cls.type_name)
+        pos = point(entry, "position", at, "the wheel centre in the base frame")
         if "heading" not in entry:
             raise InputError(f"{at}: missing key 'heading'; give the rolling direction in the "
                              "base frame [rad]")
-        heading = _entry_number(entry, "heading", at, None)
-        radius = _entry_number(entry, "wheel_radius", at, defaults.get("wheel_radius"), True)
-        k_t = _entry_number(entry, "torque_constant", at, defaults.get("torque_constant"), True)
-        return OmniSpec(name, (float(pos[0]), float(pos[1])), heading, radius, k_t)
+        heading = number(entry, "heading", at)
+        radius = resolved(entry, "wheel_radius", at, where, defaults, True,
+                          "the wheel radius in metres")
+        k_t = resolved(entry, "torque_constant", at, where, defaults, True, "k_t in N m/A")
+        return OmniSpec(name, pos, heading, radius, k_t)
+
+    @classmethod
+    def group_key(cls, spec: OmniSpec) -> Hashable:
+        return ()  # radius, heading and torque constant are per unit
+
+    @classmethod
+    def from_specs(cls, specs: Sequence[OmniSpec], friction_tanh_gain: float = 10.0
+                   ) -> OmniUnits:
+        return cls(specs, friction_tanh_gain)
 
     @classmethod
     def from_platform_dict(cls, data: Mapping[str, Any], where: str = "<platform>") -> OmniUnits:
         """The omni units of a parsed platform file (entries with ``type: omni``)."""
-        defaults = {}
-        for key in ("wheel_radius", "torque_constant"):
-            if key in data:
-                defaults[key] = _entry_number(data, key, where, None, True)
-        alpha = _entry_number(data, "friction_tanh_gain", where, 10.0, True)
-        units = data.get("units")
-        if not isinstance(units, list):
-            raise InputError(f"{where}: missing key 'units' (a list of unit entries)")
-        specs = [cls.parse_entry(e, k, where, defaults) for k, e in enumerate(units)
-                 if isinstance(e, Mapping) and e.get("type") == cls.type_name]
+        from ropod_sysid.platform import platform_from_dict
+
+        platform = platform_from_dict(data, where, min_units=1)
+        specs = [u for u in platform.units if u.type == cls.type_name]
         if not specs:
             raise InputError(f"{where}: no unit has 'type: omni'")
-        names = [s.name for s in specs]
-        for name in names:
-            if names.count(name) > 1:
-                raise InputError(f"{where}: unit name {name!r} is used twice; names must be "
-                                 "unique")
-        return cls(specs, alpha)
+        return cls(specs, platform.friction_tanh_gain)
 
-    @staticmethod
-    def channels(unit: str) -> tuple[Channel, ...]:
-        """The log columns of one omni unit."""
-        return (Channel(f"phi_{unit}", "rad", "wheel encoder angle, unwrapped"),
-                Channel(f"cur_{unit}", "A", "motor current"))
+    @classmethod
+    def typical_parameters(cls, units: Sequence[str]) -> dict[str, float]:
+        """Values of the order of the 5DPO robot's (004 Table III; the wheel inertia of a
+        32.5 mm wheel with a 5:1 gear motor) with dissipative per-wheel friction."""
+        rng = np.random.default_rng(2004)
+        out = {"Jrot_o": 2.0e-4}
+        for u in units:
+            out[f"fov_{u}"] = -float(0.004 + 0.002 * rng.random())
+            out[f"foc_{u}"] = -float(0.010 + 0.010 * rng.random())
+        return out
+
+    def torque_constants(self) -> np.ndarray:
+        return self.k_t.copy()
+
+    def initial_angles(self, twist: np.ndarray) -> np.ndarray:
+        return np.zeros(self.n_units)
 
     @staticmethod
     def friction_names(units: Sequence[str], variant: FrictionVariant = "per-wheel"
                        ) -> list[str]:
         """Friction parameter names, ordered as :meth:`friction_columns`."""
-        if _variant(variant) == "shared":
+        if check_variant(variant) == "shared":
             return ["fov", "foc"]
         if variant == "body":
-            return list(BODY_FRICTION)
+            return []
         return [n for u in units for n in (f"fov_{u}", f"foc_{u}")]
 
     # ------------------------------------------------------------ kinematics
@@ -211,13 +218,14 @@ class OmniUnits:
         ang = np.asarray(q, float)[:, 2:3] + self.headings  # θ + a_i, (N, k)
         return np.cos(ang), np.sin(ang)
 
-    def kinematics(self, q: np.ndarray, qd: np.ndarray,
-                   wheel_rate: np.ndarray | None = None) -> OmniData:
+    def kinematics(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray | None = None,
+                   angle_rates: np.ndarray | None = None) -> OmniData:
         """J_i, J̇_i q̇_b (O1, O2) for base pose q and twist qd (N, 3) in world coordinates.
 
-        ``wheel_rate`` (measured φ̇, (N, k)) is used for friction and energy; when omitted it
-        follows from the constraint O1.
+        ``angle_rates`` (measured φ̇, (N, k)) is used for friction and energy; when omitted it
+        follows from the constraint O1. The wheel angles themselves do not enter.
         """
+        wheel_rate = angle_rates
         q = np.asarray(q, float)
         qd = np.asarray(qd, float)
         ch, sh = self._world_headings(q)
@@ -230,26 +238,41 @@ class OmniUnits:
             wheel_rate = np.einsum("nkc,nc->nk", jac, qd)
         return OmniData(q[:, 2].copy(), qd, jac, jdq, np.asarray(wheel_rate, float))
 
-    def actuator_rates(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def actuator_rates(self, q: np.ndarray, qd: np.ndarray,
+                       angles: np.ndarray | None = None) -> np.ndarray:
         """φ̇_i = J_i q̇_b (O1) the base motion asks of the wheels; shape (N, k)."""
         ch, sh = self._world_headings(q)
         qd = np.asarray(qd, float)
         return (ch * qd[:, 0:1] + sh * qd[:, 1:2] + self.moment_arm * qd[:, 2:3]) / self.r
 
-    def constraint_rows(self, q: np.ndarray,
-                        joint_rates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Rows A (N, k, 3), b (N, k) with A q̇_b = b from measured φ̇ (N, k) (O1, in m/s).
+    def angle_rates(self, q: np.ndarray, qd: np.ndarray,
+                    angles: np.ndarray | None = None) -> np.ndarray:
+        """The wheel rates (N, k) the base motion implies (O1)."""
+        return self.actuator_rates(q, qd)
 
-        Each row is the rim-speed equation r_i φ̇_i = H_iᵀ ṙ + c_i θ̇; wheel odometry stacks
-        the rows of every unit and solves them by least squares. With θ = 0 in ``q`` the rows
-        are those of the base-frame twist (v, v_n, ω) (004 eq. 2).
+    def constraint_rows(self, angles: np.ndarray, rates: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Rows A (N, k, 3), b (N, k) with A ν = b in the base-frame twist ν = (v, v_n, ω)
+        from measured φ̇ (N, k) (O1 with θ = 0, in m/s; 004 eq. 2).
+
+        Each row is the rim-speed equation r_i φ̇_i = h_iᵀ v + c_i ω; wheel odometry stacks
+        the rows of every unit and solves them by least squares. ``rates`` may be increments
+        (displacements instead of a twist).
         """
-        ch, sh = self._world_headings(q)
-        a = np.empty((*ch.shape, 3))
-        a[..., 0] = ch
-        a[..., 1] = sh
+        rates = np.asarray(rates, float)
+        a = np.empty((rates.shape[0], self.n_units, 3))
+        a[..., 0] = np.cos(self.headings)
+        a[..., 1] = np.sin(self.headings)
         a[..., 2] = self.moment_arm
-        return a, np.asarray(joint_rates, float) * self.r
+        return a, rates * self.r
+
+    def normal_equations(self, angles: np.ndarray, increments: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """AᵀA (N, 3, 3) and Aᵀb (N, 3) of :meth:`constraint_rows` (AᵀA is constant)."""
+        a, b = self.constraint_rows(angles, increments)
+        row = a[0]
+        ata = np.broadcast_to(row.T @ row, (b.shape[0], 3, 3)).copy()
+        return ata, b @ row
 
     def torques(self, currents: np.ndarray) -> np.ndarray:
         """Wheel torques τ_i = k_t,i i_i (004 eq. 13) from motor currents (N, k)."""
@@ -277,34 +300,45 @@ class OmniUnits:
                          variant: FrictionVariant = "per-wheel") -> np.ndarray:
         """τ_f,i = f_ov,i φ̇_i + f_oc,i tanh(α φ̇_i), added to the motor torque; (N, k).
 
-        Missing coefficients are zero; with ``body`` friction the wheels have none.
+        A per-wheel coefficient missing from ``params`` is the shared one, else zero; with
+        ``body`` friction the wheels have none.
         """
-        if _variant(variant) == "body":
+        if check_variant(variant) == "body":
             return np.zeros_like(data.wheel_rate)
         if variant == "shared":
             fov = np.full(self.n_units, float(params.get("fov", 0.0)))
             foc = np.full(self.n_units, float(params.get("foc", 0.0)))
         else:
-            fov = np.array([float(params.get(f"fov_{u}", 0.0)) for u in self.names])
-            foc = np.array([float(params.get(f"foc_{u}", 0.0)) for u in self.names])
+            fov = np.array([float(params.get(f"fov_{u}", params.get("fov", 0.0)))
+                            for u in self.names])
+            foc = np.array([float(params.get(f"foc_{u}", params.get("foc", 0.0)))
+                            for u in self.names])
         phid = data.wheel_rate
         return fov * phid + foc * np.tanh(self.alpha * phid)
 
-    def friction_columns(self, data: OmniData, variant: FrictionVariant = "per-wheel"
-                         ) -> np.ndarray:
+    def friction_force(self, data: OmniData, params: Mapping[str, float],
+                       variant: FrictionVariant = "per-wheel") -> None:
+        """No unactuated joint: all friction enters through B_τ (or the base's body axes)."""
+        return None
+
+    def friction_columns(self, data: OmniData, variant: FrictionVariant = "per-wheel",
+                         out: np.ndarray | None = None) -> np.ndarray:
         """Columns of A_ID,ext for :meth:`friction_names` (thesis eq. 66); (N, 3, p_f).
 
-        Wheel friction: −B_τ,i [φ̇_i, tanh(α φ̇_i)] (per wheel) or their sums (shared); body
-        friction: :func:`body_friction_columns`.
+        −B_τ,i [φ̇_i, tanh(α φ̇_i)] (per wheel) or their sums (shared); none with ``body``.
         """
-        if _variant(variant) == "body":
-            return body_friction_columns(data.theta, data.qd, self.alpha)
         phid = data.wheel_rate
-        a_f = np.stack([phid, np.tanh(self.alpha * phid)], axis=-1)  # (N, k, 2)
-        cols = -data.b_tau[..., None] * a_f[:, None]  # (N, 3, k, 2)
-        if variant == "shared":
-            return cols.sum(axis=2)
-        return cols.reshape(cols.shape[0], 3, -1)
+        if check_variant(variant) == "body":
+            cols = np.zeros((phid.shape[0], 3, 0))
+        else:
+            a_f = np.stack([phid, np.tanh(self.alpha * phid)], axis=-1)  # (N, k, 2)
+            full = -data.b_tau[..., None] * a_f[:, None]  # (N, 3, k, 2)
+            cols = full.sum(axis=2) if variant == "shared" else full.reshape(
+                full.shape[0], 3, -1)
+        if out is not None:
+            out[...] = cols
+            return out
+        return cols
 
     def kinetic_energy(self, data: OmniData, params: Mapping[str, float]) -> np.ndarray:
         """Σ_i ½ J_rot,o φ̇_i² [J]; shape (N,)."""
@@ -333,31 +367,3 @@ class OmniUnits:
                            - np.einsum("nkc,nc->nk", data.jac, q_fit) * self.r)
         return out
 
-
-def body_velocity(theta: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """ν = (v, v_n, ω): the world twist in the robot frame (004 eq. 1); shape (N, 3)."""
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([c * qd[:, 0] + s * qd[:, 1], -s * qd[:, 0] + c * qd[:, 1], qd[:, 2]],
-                    axis=-1)
-
-
-def body_friction_force(theta: np.ndarray, qd: np.ndarray, params: Mapping[str, float],
-                        alpha: float) -> np.ndarray:
-    """Generalized body-axis friction force in world coordinates, B_Fb F_f; (N, 3).
-
-    F_f = f_bv ⊙ ν + f_bc ⊙ tanh(α ν) in the base frame (004 eqs. 6–8 with the signs of the
-    contract: added, so dissipative coefficients are negative).
-    """
-    nu = body_velocity(theta, qd)
-    fbv = np.array([float(params.get(n, 0.0)) for n in BODY_FRICTION[:3]])
-    fbc = np.array([float(params.get(n, 0.0)) for n in BODY_FRICTION[3:]])
-    f = fbv * nu + fbc * np.tanh(alpha * nu)
-    return np.einsum("ncd,nd->nc", base.b_fb(theta), f)
-
-
-def body_friction_columns(theta: np.ndarray, qd: np.ndarray, alpha: float) -> np.ndarray:
-    """Columns of A_ID,ext for ``fbv_x … fbc_w``: −B_Fb e_j ν_j and −B_Fb e_j tanh(α ν_j);
-    shape (N, 3, 6)."""
-    nu = body_velocity(theta, qd)
-    b = base.b_fb(theta)  # (N, 3, 3)
-    return -np.concatenate([b * nu[:, None, :], b * np.tanh(alpha * nu)[:, None, :]], axis=2)
