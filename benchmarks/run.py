@@ -108,13 +108,13 @@ def make_base(seconds: float, fresh: bool) -> tuple[Path, Path, Path, bool]:
     from ropod_sysid.platform import ropod_platform, save_platform
 
     OUT.mkdir(parents=True, exist_ok=True)
-    pf = ropod_platform().with_pivots(np.array(OFF_SQUARE))
+    pf = ropod_platform().with_positions(np.array(OFF_SQUARE))
     platform_path = OUT / "platform.yaml"
     truth_path = OUT / "truth.json"
     traj_path = OUT / f"trajectory_{seconds:g}s.csv"
     save_platform(pf, platform_path)
     truth_path.write_text(json.dumps(thesis_fixed_masses(pf.unit_names)
-                                     .to_mapping(pf.unit_names), indent=1))
+                                     .to_mapping(), indent=1))
     np.savetxt(traj_path, setpoints(seconds), delimiter=",", header="t,vx,vy,omega",
                comments="", fmt="%.9g")
     base = OUT / f"base_{seconds:g}s.csv"

@@ -38,7 +38,7 @@ def four_variants(duration: float) -> list[Setpoints]:
 
 @pytest.fixture(scope="session")
 def off_square() -> Platform:
-    return ropod_platform().with_pivots(OFF_SQUARE)
+    return ropod_platform().with_positions(OFF_SQUARE)
 
 
 @pytest.fixture(scope="session")

@@ -43,7 +43,7 @@ def setpoints(duration: float, sx: float, sw: float, phase: float) -> Setpoints:
 @pytest.fixture(scope="module")
 def sim():
     """Three 6 s runs simulated together: two to fit, one to validate on."""
-    platform = ropod_platform().with_pivots(PIVOTS)
+    platform = ropod_platform().with_positions(PIVOTS)
     params = thesis_fixed_masses(platform.unit_names)
     # 2.5 ms RK4 steps (stride 2 to the 200 Hz log): the report needs plausible runs, not
     # the 1 ms fidelity of the identification tests

@@ -36,7 +36,7 @@ def ropod():
 
 @pytest.fixture(scope="module")
 def off_square(ropod):
-    return ropod.with_pivots(OFF_SQUARE)
+    return ropod.with_positions(OFF_SQUARE)
 
 
 @pytest.fixture(scope="module")

@@ -37,7 +37,7 @@ def main() -> None:
     truth = thesis_fixed_masses(platform.unit_names)
     save_platform(platform, HERE / "platform.yaml")
     (HERE / "truth.json").write_text(
-        json.dumps(truth.to_mapping(platform.unit_names), indent=2) + "\n")
+        json.dumps(truth.to_mapping(), indent=2) + "\n")
     runs = variants(typical(duration=60.0, platform=platform, seed=0))
     (HERE / "trajectory").mkdir(exist_ok=True)
     for name, traj in runs.items():
@@ -47,8 +47,8 @@ def main() -> None:
                        rate=RATE, sensors=SENSORS, quiet=False)
     for name, res in zip(runs, results, strict=True):
         log = res.log
-        log = dataclasses.replace(log, t=np.round(log.t, 6), delta=np.round(log.delta, 7),
-                                  phi=np.round(log.phi, 7), current=np.round(log.current, 5))
+        log = dataclasses.replace(log, t=np.round(log.t, 6), angles=np.round(log.angles, 7),
+                                  currents=np.round(log.currents, 5))
         write_log(log, HERE / f"{name}.csv.gz")
         print(f"{name}: {log.n_samples} samples, {log.duration:.1f} s")
 

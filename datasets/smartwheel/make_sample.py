@@ -76,7 +76,7 @@ def main() -> None:
     truth = thesis_fixed_masses(platform.unit_names)
     save_platform(platform, HERE / "platform.yaml")
     (HERE / "truth.json").write_text(
-        json.dumps(truth.to_mapping(platform.unit_names), indent=2) + "\n")
+        json.dumps(truth.to_mapping(), indent=2) + "\n")
     (res,) = simulate(platform, truth, setpoints(), rate=RATE, sensors=SENSORS, quiet=False,
                       source="sample.mcap")
     frames = write_smartwheel(res.log, HERE / "sample.mcap", platform, encoding="json",
