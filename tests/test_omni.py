@@ -16,13 +16,13 @@ import yaml
 from ropod_sysid.errors import InputError
 from ropod_sysid.model import base
 from ropod_sysid.model.units import UNIT_TYPES
-from ropod_sysid.model.units.omni import (
+from ropod_sysid.model.base import (
     BODY_FRICTION,
-    OmniSpec,
-    OmniUnits,
     body_friction_columns,
     body_friction_force,
+    body_velocity,
 )
+from ropod_sysid.model.units.omni import OmniSpec, OmniUnits
 
 PLATFORM = Path(__file__).resolve().parents[1] / "datasets" / "omni" / "platform.yaml"
 D, R, M, J = 0.089, 0.0325, 2.34, 0.0228  # 004 Table III
@@ -132,17 +132,20 @@ def test_jacobian_against_the_differentiated_wheel_centres(make) -> None:
 def test_constraint_rows_give_odometry_by_least_squares(make) -> None:
     units = make()
     q, qd, _ = states(30, seed=2)
-    a, b = units.constraint_rows(q, units.actuator_rates(q, qd))
+    a, b = units.constraint_rows(None, units.actuator_rates(q, qd))
     assert a.shape == (30, units.n_units, 3) and b.shape == (30, units.n_units)
+    nu = body_velocity(q[:, 2], qd)  # the rows are in the base-frame twist
     twist = np.linalg.lstsq(a[0], b[0], rcond=None)[0]
-    np.testing.assert_allclose(twist, qd[0], atol=1e-12)
+    np.testing.assert_allclose(twist, nu[0], atol=1e-12)
     solved = np.linalg.solve(np.einsum("nkc,nkd->ncd", a, a),
                              np.einsum("nkc,nk->nc", a, b)[..., None])[..., 0]
-    np.testing.assert_allclose(solved, qd, atol=1e-11)
+    np.testing.assert_allclose(solved, nu, atol=1e-11)
+    ata, atb = units.normal_equations(None, units.actuator_rates(q, qd))
+    np.testing.assert_allclose(np.linalg.solve(ata, atb[..., None])[..., 0], nu, atol=1e-11)
     # rows are rim speeds [m/s]: a wheel rate error δφ̇ shows as r δφ̇ in the slip quantity
     phid = units.actuator_rates(q, qd)
     phid[:, 0] += 0.5
-    slip = units.quantities(units.kinematics(q, qd, phid), qd)["slip"]
+    slip = units.quantities(units.kinematics(q, qd, None, phid), qd)["slip"]
     assert slip[0] == "m/s"
     np.testing.assert_allclose(slip[1][:, 0], 0.5 * units.r[0], atol=1e-12)
     np.testing.assert_allclose(slip[1][:, 1:], 0.0, atol=1e-12)
@@ -359,7 +362,7 @@ def test_regressor_columns_reproduce_the_equations_of_motion(make, variant: str)
     params = {"m_b": M, "Jzz_b": J, "Jrot_o": 2e-4} | values
     q, qd, qdd = states(12, seed=10)
     phid = units.actuator_rates(q, qd) + rng.normal(size=(12, units.n_units)) * 0.1
-    data = units.kinematics(q, qd, phid)
+    data = units.kinematics(q, qd, None, phid)
     a_ext = np.concatenate([base.a_id_base(qdd), units.a_id(data, qdd),
                             units.friction_columns(data, variant)], axis=2)
     m_ext = np.array([M, J, 2e-4] + [values[n] for n in names])
@@ -379,8 +382,9 @@ def test_parameter_and_channel_names() -> None:
     assert units.friction_names(units.names) == ["fov_0", "foc_0", "fov_1", "foc_1", "fov_2",
                                                  "foc_2", "fov_3", "foc_3"]
     assert units.friction_names(units.names, "shared") == ["fov", "foc"]
-    assert units.friction_names(units.names, "body") == list(BODY_FRICTION)
-    assert [(c.name, c.unit) for c in units.channels("3")] == [("phi_3", "rad"), ("cur_3", "A")]
+    assert units.friction_names(units.names, "body") == []  # the base's: BODY_FRICTION
+    assert [(c.column("3"), c.unit) for c in (*units.angles, *units.currents)] == [
+        ("phi_3", "rad"), ("cur_3", "A")]
     with pytest.raises(InputError, match="^unknown friction model 'wheel'; use per-wheel, "
                                          "shared or body$"):
         units.friction_names(units.names, "wheel")  # type: ignore[arg-type]
@@ -406,8 +410,8 @@ def test_per_unit_overrides_of_radius_and_torque_constant() -> None:
                                atol=1e-8)
     np.testing.assert_allclose(units.torques(np.ones((1, 4)))[0], units.k_t)
     # same floor speed, so the rim-speed constraint rows are those of the reference
-    a, b = units.constraint_rows(q, units.actuator_rates(q, qd))
-    a_ref, b_ref = ref.constraint_rows(q, ref.actuator_rates(q, qd))
+    a, b = units.constraint_rows(None, units.actuator_rates(q, qd))
+    a_ref, b_ref = ref.constraint_rows(None, ref.actuator_rates(q, qd))
     np.testing.assert_allclose(a, a_ref)
     np.testing.assert_allclose(b, b_ref, rtol=1e-13)
 
@@ -423,8 +427,8 @@ def test_per_unit_overrides_of_radius_and_torque_constant() -> None:
      "'north'; write a plain number in SI units (e.g. 0.05 or 5e-2)"),
     ({"heading": float("inf")}, "p.yaml: 'units[1]' (unit '1'): key 'heading' must be finite, "
      "got inf; give its value in SI units"),
-    ({"wheel_radius": -0.03}, "p.yaml: 'units[1]' (unit '1'): key 'wheel_radius' must be > 0, "
-     "got -0.03"),
+    ({"wheel_radius": -0.03}, "p.yaml: 'units[1]' (unit '1'): 'wheel_radius' must be > 0, "
+     "got -0.03; give the wheel radius in metres"),
     ({"torque_constant": True}, "p.yaml: 'units[1]' (unit '1'): key 'torque_constant' must be a "
      "number, got True; write a plain number in SI units (e.g. 0.05 or 5e-2)"),
     ({"pivot": [0, 0]}, "p.yaml: 'units[1]' (unit '1'): unknown key 'pivot' for type omni; "
@@ -447,8 +451,8 @@ def test_platform_entry_validation_messages(change: dict, message: str) -> None:
 def test_platform_level_messages() -> None:
     data = yaml.safe_load(PLATFORM.read_text())
     del data["wheel_radius"]
-    with pytest.raises(InputError, match=r"^p.yaml: 'units\[0\]' \(unit '0'\): missing key "
-                                         "'wheel_radius'"):
+    with pytest.raises(InputError, match=r"^p.yaml: missing key 'wheel_radius'; add it \(SI "
+                                         r"units, see docs/file-formats.md\)$"):
         OmniUnits.from_platform_dict(data, "p.yaml")
     with pytest.raises(InputError, match="^p.yaml: no unit has 'type: omni'$"):
         OmniUnits.from_platform_dict({"units": [{"name": "1", "pivot": [0, 0]}]}, "p.yaml")
@@ -459,6 +463,6 @@ def test_platform_level_messages() -> None:
         OmniUnits.parse_entry({"name": "a b"}, 0, "p.yaml", {})
     data = yaml.safe_load(PLATFORM.read_text())
     data["units"][3]["name"] = "1"
-    with pytest.raises(InputError, match="^p.yaml: unit name '1' is used twice; names must be "
-                                         "unique$"):
+    with pytest.raises(InputError, match=r"^p.yaml: 'units\[3\].name' '1' is used twice; "
+                                         "names must be unique$"):
         OmniUnits.from_platform_dict(data, "p.yaml")

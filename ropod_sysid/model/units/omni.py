@@ -180,11 +180,13 @@ class OmniUnits:
         """The omni units of a parsed platform file (entries with ``type: omni``)."""
         from ropod_sysid.platform import platform_from_dict
 
-        platform = platform_from_dict(data, where, min_units=1)
-        specs = [u for u in platform.units if u.type == cls.type_name]
-        if not specs:
+        units = data.get("units")
+        ours = [e for e in units if isinstance(e, Mapping) and e.get("type") == cls.type_name] \
+            if isinstance(units, list) else []
+        if not ours:
             raise InputError(f"{where}: no unit has 'type: omni'")
-        return cls(specs, platform.friction_tanh_gain)
+        platform = platform_from_dict(dict(data, units=ours), where, min_units=1)
+        return cls(platform.units, platform.friction_tanh_gain)
 
     @classmethod
     def typical_parameters(cls, units: Sequence[str]) -> dict[str, float]:
