@@ -15,13 +15,13 @@ import yaml
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.model import base
-from ropod_sysid.model.units import UNIT_TYPES
 from ropod_sysid.model.base import (
     BODY_FRICTION,
     body_friction_columns,
     body_friction_force,
     body_velocity,
 )
+from ropod_sysid.model.units import UNIT_TYPES
 from ropod_sysid.model.units.omni import OmniSpec, OmniUnits
 
 PLATFORM = Path(__file__).resolve().parents[1] / "datasets" / "omni" / "platform.yaml"
