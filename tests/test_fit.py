@@ -2,18 +2,17 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from ropod_sysid.errors import IdentifiabilityError, InputError
 from ropod_sysid.fit import FitOptions, fit_logs, physical_bounds
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import INERTIAL, parameter_names, thesis_fixed_masses
+from ropod_sysid.params import is_inertial, parameter_names, thesis_fixed_masses
 from ropod_sysid.platform import ropod_platform
 from ropod_sysid.regressor import Span, preprocess, raw_system
 from ropod_sysid.solve import Triangles, qr_triangle, solve, stack_triangles
+from tests.swivel_arrays import C, D, P, with_arrays
 
 
 def rel_err(fit, truth_vec):
@@ -25,11 +24,11 @@ def test_exact_logs_recover_every_parameter(off_square, truth, runs_off_square):
     the base mass and inertia within 1.5 %, friction within 2 %."""
     fit = fit_logs([r.log for r in runs_off_square], off_square)
     names = fit.names
-    err = rel_err(fit, truth.vector(off_square.unit_names))
+    err = rel_err(fit, truth.vector(parameter_names(off_square)))
     assert fit.solution.rank == len(names) == 29
     assert np.all(err < 0.03), dict(zip(names, err.round(4), strict=True))
     assert err[names.index("m_b")] < 0.015 and err[names.index("Jzz_b")] < 0.015
-    friction = [j for j, n in enumerate(names) if n not in INERTIAL]
+    friction = [j for j, n in enumerate(names) if not is_inertial(n)]
     assert np.all(err[friction] < 0.02)
     assert fit.rms["translation"] < 0.5 and fit.rms["rotation"] < 0.1
 
@@ -38,12 +37,12 @@ def test_noisy_logs_errors_are_covered_by_std(off_square, truth, runs_off_square
     """2¹⁴-count encoders, 30 mA current noise: the errors stay within the standard
     deviations the parameter file promises (measured: at most 1.7σ, median 0.4σ)."""
     fit = fit_logs(runs_off_square_noisy, off_square)
-    true = truth.vector(off_square.unit_names)
+    true = truth.vector(parameter_names(off_square))
     sol = fit.solution
     z = np.abs(sol.values - true) / sol.std
     assert np.all(z < 3), dict(zip(sol.names, z.round(1), strict=True))
     # the effective translational inertia m_b + 4 m_wh + 8 J_rot/R_w² is well determined
-    rw = off_square.wheel_radius
+    rw = off_square.units[0].wheel_radius
     eff = lambda v: v[0] + 4 * v[2] + 8 * v[4] / rw**2  # noqa: E731
     assert eff(sol.values) == pytest.approx(eff(true), rel=0.01)
     friction = [j for j, n in enumerate(sol.names) if n.startswith(("fwv", "fpv"))]
@@ -54,7 +53,7 @@ def test_symmetric_ropod_names_its_null_space(runs_square):
     """Thesis Sec. VI-C: with symmetric attachment points the stacked regressor loses rank.
     The fit names the combination and recovers the identifiable combinations."""
     pf = ropod_platform()
-    true = thesis_fixed_masses(pf.unit_names).vector(pf.unit_names)
+    true = thesis_fixed_masses(pf.unit_names).vector(parameter_names(pf))
     fit = fit_logs([r.log for r in runs_square], pf)
     sol = fit.solution
     assert sol.rank == 28
@@ -64,7 +63,7 @@ def test_symmetric_ropod_names_its_null_space(runs_square):
     # independent route: the null vector of A_ID,ext built from the exact simulated states
     model = PlatformModel(pf)
     r = runs_square[0]
-    st = model.state(r.q, r.qd, r.delta)
+    st = model.state(r.q, r.qd, r.angles)
     a = model.a_id_ext(st, r.qdd)[:, :, :5].reshape(-1, 5)
     scale = np.linalg.norm(a, axis=0)
     _, s, vt = np.linalg.svd(a / scale, full_matrices=False)
@@ -134,7 +133,7 @@ def test_triangles_equal_the_stacked_least_squares(off_square, runs_off_square):
     a_all = np.vstack([a for a, _ in blocks])
     b_all = np.concatenate([b for _, b in blocks])
     x_ref = np.linalg.lstsq(a_all, b_all, rcond=None)[0]
-    names = parameter_names(off_square.unit_names)
+    names = parameter_names(off_square)
     sol = solve(stack_triangles(tris), len(b_all), names)
     np.testing.assert_allclose(sol.values, x_ref, rtol=1e-8)
     # and chunked triangles equal one-shot triangles
@@ -150,8 +149,8 @@ def test_fix_holds_a_parameter(off_square, truth, runs_off_square):
     assert sol.values[0] == 35.1 and sol.values[2] == 4.2
     assert np.isnan(sol.std[0]) and np.isnan(sol.std[2])
     assert sol.rank == 27
-    err = np.abs(sol.values - truth.vector(off_square.unit_names))
-    assert err[1] / truth.Jzz_b < 0.02
+    err = np.abs(sol.values - truth.vector(parameter_names(off_square)))
+    assert err[1] / truth["Jzz_b"] < 0.02
     with pytest.raises(InputError, match="--fix m_x: unknown parameter"):
         fit_logs([runs_off_square[0].log], off_square, FitOptions(fix={"m_x": 1.0}))
 
@@ -170,8 +169,11 @@ def test_shared_friction_has_nine_parameters(off_square, truth, runs_off_square)
                    FitOptions(friction="shared"))
     assert fit.names == ["m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w", "fwv", "fwc", "fpv", "fpc"]
     # the shared coefficients land near the mean of the per-wheel truth
-    assert fit.solution.values[5] == pytest.approx(truth.fwv.mean(), rel=0.15)
-    assert fit.solution.values[7] == pytest.approx(truth.fpv.mean(), rel=0.15)
+    def mean(family: str) -> float:
+        return float(np.mean([v for k, v in truth.items() if k.startswith(family + "_")]))
+
+    assert fit.solution.values[5] == pytest.approx(mean("fwv"), rel=0.15)
+    assert fit.solution.values[7] == pytest.approx(mean("fpv"), rel=0.15)
 
 
 def test_input_delay_is_estimated(off_square, runs_off_square):
@@ -180,8 +182,8 @@ def test_input_delay_is_estimated(off_square, runs_off_square):
     logs = []
     for r in runs_off_square:
         log = r.log
-        cur = np.concatenate([log.current[shift:], np.repeat(log.current[-1:], shift, 0)])
-        logs.append(dataclasses.replace(log, current=cur))
+        cur = np.concatenate([C(log)[shift:], np.repeat(C(log)[-1:], shift, 0)])
+        logs.append(with_arrays(log, current=cur))
     fit = fit_logs(logs, off_square, FitOptions(input_delay="auto"))
     assert fit.input_delay == pytest.approx(shift / 200.0, abs=1.5e-3)
     plain = fit_logs(logs, off_square)
@@ -190,8 +192,8 @@ def test_input_delay_is_estimated(off_square, runs_off_square):
 
 def test_rank_zero_is_an_error(off_square, runs_off_square):
     log = runs_off_square[0].log
-    still = dataclasses.replace(log, delta=np.zeros_like(log.delta),
-                                phi=np.zeros_like(log.phi), current=np.zeros_like(log.current))
+    still = with_arrays(log, delta=np.zeros_like(D(log)), phi=np.zeros_like(P(log)),
+                        current=np.zeros_like(C(log)))
     with pytest.raises(IdentifiabilityError, match="rank 0"):
         fit_logs([still], off_square)
 

@@ -31,9 +31,9 @@ def test_contract_example_loads(tmp_path):
     pf = load_platform(p)
     assert pf == ropod_platform()
     assert pf.unit_names == ["1", "2", "3", "4"]
-    np.testing.assert_allclose(pf.pivots, [[0.21, 0.21], [-0.21, 0.21], [-0.21, -0.21],
+    np.testing.assert_allclose(pf.positions, [[0.21, 0.21], [-0.21, 0.21], [-0.21, -0.21],
                                            [0.21, -0.21]])
-    assert pf.s_cm == pytest.approx(0.015)
+    assert [u.s_cm for u in pf.units] == pytest.approx([0.015] * 4)
     save_platform(pf, tmp_path / "again.yaml")
     assert load_platform(tmp_path / "again.yaml") == pf
 
@@ -49,7 +49,8 @@ def test_contract_example_loads(tmp_path):
     (lambda d: d["units"][1].update(name="1"), "'units[1].name' '1' is used twice"),
     (lambda d: d["units"][2].update(name="front left"), "'units[2].name'"),
     (lambda d: d["units"][0].update(pivot=[0.1]), "'units[0].pivot' must be two"),
-    (lambda d: d["units"][0].update(type="omni"), "known unit types: swivel"),
+    (lambda d: d["units"][0].update(type="mecanum"),
+     "'units[0].type' is 'mecanum'; known unit types: swivel, omni"),
     (lambda d: d["units"][3].update(sign_left=2), "'units[3].sign_left' must be 1 or -1"),
 ])
 def test_bad_platform_files(tmp_path, edit, message):

@@ -86,7 +86,7 @@ def test_stream_gathers_the_rows_and_samples_of_the_in_memory_path(off_square,
     assert plot.samples == log.n_samples and plot.duration == pytest.approx(log.duration)
     assert not plot.has_pose and plot.dt == pytest.approx(0.005)
     # every logged sample's torque passes the envelope: its extremes are the log's
-    tau = off_square.torque_constant * log.current.reshape(log.n_samples, -1)
+    tau = off_square.torque_constants() * log.currents
     np.testing.assert_allclose(np.nanmax(plot.torque[1], axis=0), tau.max(axis=0))
     np.testing.assert_allclose(np.nanmin(plot.torque[1], axis=0), tau.min(axis=0))
     np.testing.assert_allclose(plot.start[:2], pre.q[0, :2], atol=1e-12)

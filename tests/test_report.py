@@ -57,7 +57,7 @@ def sim():
 @pytest.fixture(scope="module")
 def truth_file(sim) -> ParameterFile:
     platform, params, _, result = sim
-    values = params.to_mapping(platform.unit_names)
+    values = params.to_mapping()
     return ParameterFile(platform.name, {k: {"value": v, "std": None} for k, v in values.items()},
                          {"translation": 0.0, "rotation": 0.0}, 1.0, len(values), 0)
 
@@ -389,7 +389,7 @@ def test_compare_accepts_a_flat_truth_mapping(sim, tmp_path):
 
     platform, params, logs, result = sim
     truth = tmp_path / "truth.json"
-    truth.write_text(json.dumps(params.to_mapping(platform.unit_names)))
+    truth.write_text(json.dumps(params.to_mapping()))
     html = render_fit_report(result, logs[:2], compare=truth)
     body = html.split('id="parameter-table"', 1)[1].split("</table>", 1)[0]
     m_b = next(r for r in body.split("<tr>")[2:] if ">m_b<" in r)

@@ -15,6 +15,7 @@ from ropod_sysid.fit import FitOptions, fit_logs
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import constraint_system, normal_equations, solve_symmetric3
+from ropod_sysid.params import parameter_names
 from ropod_sysid.regressor import (
     RowGrid,
     Span,
@@ -24,6 +25,7 @@ from ropod_sysid.regressor import (
     row_inputs,
     triangles,
 )
+from tests.swivel_arrays import angles_of
 
 
 @pytest.mark.parametrize(("k", "step", "span"), [(101, 10, 11), (21, 2, 11), (11, 1, 11),
@@ -70,7 +72,7 @@ def test_rows_are_states_at_the_row_samples_with_averaged_torques(off_square, ru
     assert idx[-1] < len(pre.t) - pre.trim <= idx[-1] + 4
     rows = row_inputs(pre, idx)
     np.testing.assert_array_equal(rows.qdd, pre.qdd[idx])
-    np.testing.assert_array_equal(rows.delta, pre.delta[idx])
+    np.testing.assert_array_equal(rows.angles, pre.angles[idx])
     j = 17
     np.testing.assert_allclose(rows.tau[j], pre.tau[idx[j] - 2: idx[j] + 3].mean(axis=0),
                                rtol=1e-14)
@@ -86,7 +88,7 @@ def test_row_grid_keeps_the_identification(off_square, truth, runs_off_square, s
     sp = Span.parse(span)
     every = fit_logs(logs, off_square, FitOptions(span=sp, row_step=1))
     fit = fit_logs(logs, off_square, FitOptions(span=sp, row_step=step))
-    true = truth.vector(off_square.unit_names, "per-wheel")
+    true = truth.vector(parameter_names(off_square, "per-wheel"))
     assert fit.solution.rank == every.solution.rank == 29
     change = np.abs(fit.solution.values / every.solution.values - 1)
     assert change.max() < moved and change[:2].max() < 0.006
@@ -114,8 +116,11 @@ def test_normal_equations_equal_those_of_the_constraint_rows(off_square):
     delta = rng.uniform(-np.pi, np.pi, (500, 4))
     delta_rate = rng.normal(size=(500, 4))
     phi_rate = rng.normal(size=(500, 4, 2))
-    a, b = constraint_system(off_square, delta, delta_rate, phi_rate)
-    ata, atb = normal_equations(off_square, delta, delta_rate, phi_rate)
+    model = PlatformModel(off_square)
+    angles = angles_of(delta)
+    rates = np.concatenate([delta_rate[..., None], phi_rate], axis=-1).reshape(500, 12)
+    a, b = constraint_system(model, angles, rates)
+    ata, atb = normal_equations(model, angles, rates)
     np.testing.assert_allclose(ata, np.einsum("nki,nkj->nij", a, a), rtol=1e-13, atol=1e-13)
     np.testing.assert_allclose(atb, np.einsum("nki,nk->ni", a, b), rtol=1e-13, atol=1e-13)
     x = solve_symmetric3(ata, atb)

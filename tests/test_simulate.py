@@ -11,6 +11,7 @@ from ropod_sysid.params import thesis_fixed_masses
 from ropod_sysid.platform import ropod_platform
 from ropod_sysid.signals import central_difference
 from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, Setpoints, record, simulate
+from tests.swivel_arrays import D, P, angles_of
 
 
 def test_energy_is_conserved_without_torque_and_friction():
@@ -23,12 +24,12 @@ def test_energy_is_conserved_without_torque_and_friction():
                                        [0, 0, 0]]))
     still = Setpoints(t, 0 * t, 0 * t, 0 * t)
     (res,) = simulate(pf, p, still, controller=Controller(0.0, 0.0, 1.0), force=force,
-                      initial_delta=np.array([0.3, -1.0, 2.0, 0.5]), rate=200.0)
+                      initial=angles_of(np.array([0.3, -1.0, 2.0, 0.5])), rate=200.0)
     after = res.energy[res.log.t > 0.35]
     assert after.mean() > 0.1  # it moves
     assert np.ptp(after) < 1e-6 * after.mean()
     # the pivots swing (the casters turn) while the energy stays put
-    assert np.ptp(res.delta[res.log.t > 0.35]) > 0.1
+    assert np.ptp(D(res)[res.log.t > 0.35]) > 0.1
 
 
 @pytest.fixture(scope="module")
@@ -42,16 +43,16 @@ def test_no_slip_constraints_hold_along_a_run(run):
     pf, r = run
     dt = 1 / 200
     qd = central_difference(r.q, dt)
-    delta_dot = central_difference(r.delta, dt)
-    phi_dot = central_difference(r.phi, dt)
-    theta_i = r.q[:, 2:3] + r.delta
+    delta_dot = central_difference(D(r), dt)
+    phi_dot = central_difference(P(r), dt)
+    theta_i = r.q[:, 2:3] + D(r)
     theta_i_dot = qd[:, 2:3] + delta_dot
     c_b, s_b = np.cos(r.q[:, 2:3]), np.sin(r.q[:, 2:3])
-    px, py = pf.pivots[:, 0], pf.pivots[:, 1]
+    px, py = pf.positions[:, 0], pf.positions[:, 1]
     # pivot velocity (5b) and kinematic-centre velocity (6b)
     xd_ib = qd[:, 0:1] + qd[:, 2:3] * (-s_b * px - c_b * py)
     yd_ib = qd[:, 1:2] + qd[:, 2:3] * (c_b * px - s_b * py)
-    s_w = pf.caster_offset
+    s_w = pf.units[0].caster_offset
     xd_i = xd_ib + theta_i_dot * s_w * np.sin(theta_i)
     yd_i = yd_ib - theta_i_dot * s_w * np.cos(theta_i)
     side = -np.sin(theta_i) * xd_i + np.cos(theta_i) * yd_i  # eq. 7
@@ -59,13 +60,13 @@ def test_no_slip_constraints_hold_along_a_run(run):
     assert np.abs(side[2:-2]).max() < 2e-3 * speed
     # eq. 11 through the model's wheel rates
     model = PlatformModel(pf)
-    want = model.wheel_rates(r.q, qd, r.delta)
+    want = model.actuator_rates(r.q, qd, r.angles).reshape(phi_dot.shape)
     assert np.abs((want - phi_dot)[2:-2]).max() < 2e-3 * np.abs(phi_dot).max()
 
 
 def test_odometry_reproduces_the_pose(run):
     pf, r = run
-    pose = odometry(pf, r.log.delta, r.log.phi)
+    pose = odometry(PlatformModel(pf), r.log.angles)
     assert np.abs(pose[:, :2] - r.q[:, :2]).max() < 1e-4
     assert np.abs(pose[:, 2] - r.q[:, 2]).max() < 1e-4
     assert np.abs(r.q[:, :2]).max() > 1.0  # it went somewhere
@@ -74,8 +75,8 @@ def test_odometry_reproduces_the_pose(run):
 def test_base_twist_inverts_the_wheel_rates(run):
     pf, r = run
     model = PlatformModel(pf)
-    st = model.state(r.q, r.qd, r.delta)
-    twist = base_twist(pf, r.delta, st.pivot_rate, st.wheel_rate)
+    st = model.state(r.q, r.qd, r.angles)
+    twist = base_twist(model, r.angles, st.angle_rate)
     c, s = np.cos(r.q[:, 2]), np.sin(r.q[:, 2])
     body = np.column_stack([c * r.qd[:, 0] + s * r.qd[:, 1], -s * r.qd[:, 0] + c * r.qd[:, 1],
                             r.qd[:, 2]])
@@ -102,8 +103,8 @@ def test_sensor_effects(run):
     log = record(pf, r, r.log.t, Sensors(encoder_counts=4096, current_noise=0.05, jitter=1e-3),
                  rng, "noisy")
     step = 2 * np.pi / 4096
-    np.testing.assert_allclose(log.phi / step, np.round(log.phi / step), atol=1e-9)
+    np.testing.assert_allclose(P(log) / step, np.round(P(log) / step), atol=1e-9)
     assert np.all(np.diff(log.t) > 0)
     assert 0 < np.abs(log.t - r.log.t).max() <= 1e-3
-    noise = log.current - r.tau / pf.torque_constant
+    noise = log.currents - r.tau / pf.torque_constants()
     assert noise.std() == pytest.approx(0.05, rel=0.05)

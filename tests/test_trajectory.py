@@ -24,6 +24,7 @@ from ropod_sysid.trajectory import (
     typical,
     variants,
 )
+from tests.swivel_arrays import angles_of
 
 FLOOR = (-3.0, 3.0, -2.0, 2.0)
 OFF_SQUARE = [[0.25, 0.18], [-0.2, 0.22], [-0.23, -0.2], [0.19, -0.24]]
@@ -117,7 +118,8 @@ def test_predicted_pivot_rates_are_the_models(ropod):
     traj = typical(duration=15.0)
     pred = predict_pivots(traj.t, traj.twist(), ropod)
     q, qd, _ = traj.kinematics()
-    model_rates = PlatformModel(ropod).joint_rates(q, qd, pred.delta)
+    rates = PlatformModel(ropod).angle_rates(q, qd, angles_of(pred.delta))
+    model_rates = rates[:, 0::3]  # δ̇ of each unit
     np.testing.assert_allclose(pred.rate, model_rates, atol=1e-9)
 
 
@@ -268,7 +270,7 @@ def test_optimize_is_repeatable_and_checks_its_input(ropod):
 def test_fit_on_simulated_runs_optimised_at_least_as_good(off_square, off_pair):
     """Simulate the four variants of both runs (one batched simulation), fit each set."""
     from ropod_sysid.fit import FitOptions, fit_logs
-    from ropod_sysid.params import thesis_fixed_masses
+    from ropod_sysid.params import parameter_names, thesis_fixed_masses
     from ropod_sysid.simulate import Sensors, simulate
 
     typ, opt = off_pair
@@ -277,7 +279,7 @@ def test_fit_on_simulated_runs_optimised_at_least_as_good(off_square, off_pair):
             + [v.to_setpoints() for v in variants(opt.trajectory).values()])
     res = simulate(off_square, truth, runs, rate=100.0, dt=2e-3,
                    sensors=Sensors(current_noise=0.05, seed=1))
-    true_vec = truth.vector(off_square.unit_names)
+    true_vec = truth.vector(parameter_names(off_square))
     rel_std, rel_err = [], []
     for part in (res[:4], res[4:]):
         fit = fit_logs([r.log for r in part], off_square, FitOptions())
