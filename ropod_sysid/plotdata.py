@@ -179,6 +179,7 @@ class PlotGather:
         self.torque = Envelope(max_points)
         self.start: np.ndarray | None = None
         self.end: np.ndarray | None = None
+        self.widths = (0, 0)  # turning angles, torques
 
     def push_samples(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, delta: np.ndarray,
                      torque: np.ndarray) -> None:
@@ -191,7 +192,9 @@ class PlotGather:
         self.end = q[-1].copy()
         self.path.push(q[:, 0], q[:, 1])
         self.velocity.push(t, qd)
-        self.delta.push(t, delta)
+        self.widths = (delta.shape[1], torque.reshape(len(t), -1).shape[1])
+        if delta.shape[1]:  # (fixed wheels have no turning angle)
+            self.delta.push(t, delta)
         self.torque.push(t, torque.reshape(len(t), -1))
 
     def push_rows(self, t: np.ndarray, a: np.ndarray, b: np.ndarray, qd: np.ndarray) -> None:
@@ -201,8 +204,8 @@ class PlotGather:
                span_samples: int, row_step: int) -> LogPlot:
         t, a, b, qd = self.rows.arrays()
         assert self.start is not None and self.end is not None
-        w = self.delta.lines()[1].shape[1]
-        n_tau = self.torque.lines()[1].shape[1]
+        w, n_tau = self.widths
+        turning = self.delta.lines(w) if w else (np.zeros((0, 0)), np.zeros((0, 0)))
         return LogPlot(t, a, b, qd, self.rows.stride, self.path.lines(), self.start, self.end,
-                       self.velocity.lines(3), self.delta.lines(w), self.torque.lines(n_tau),
+                       self.velocity.lines(3), turning, self.torque.lines(n_tau),
                        samples, duration, has_pose, dt, span_samples, row_step)

@@ -13,19 +13,13 @@ gzip-compressed, which keeps the set under 5 MB. Takes a few minutes (RK4 at 1 k
 
 from __future__ import annotations
 
-import dataclasses
-import gzip
-import json
 from pathlib import Path
 
-import numpy as np
-
-from ropod_sysid.io import write_log
-from ropod_sysid.io.atomic import atomic_write_bytes
 from ropod_sysid.params import thesis_fixed_masses
-from ropod_sysid.platform import ropod_platform, save_platform
-from ropod_sysid.simulate import Sensors, simulate
-from ropod_sysid.trajectory import trajectory_csv_text, typical, variants
+from ropod_sysid.platform import ropod_platform
+from ropod_sysid.samples import write_dataset
+from ropod_sysid.simulate import Sensors
+from ropod_sysid.trajectory import typical, variants
 
 HERE = Path(__file__).resolve().parent
 RATE = 100.0
@@ -35,22 +29,8 @@ SENSORS = Sensors(encoder_counts=2**14, current_noise=0.03, jitter=0.0005, seed=
 def main() -> None:
     platform = ropod_platform()
     truth = thesis_fixed_masses(platform.unit_names)
-    save_platform(platform, HERE / "platform.yaml")
-    (HERE / "truth.json").write_text(
-        json.dumps(truth.to_mapping(), indent=2) + "\n")
     runs = variants(typical(duration=60.0, platform=platform, seed=0))
-    (HERE / "trajectory").mkdir(exist_ok=True)
-    for name, traj in runs.items():
-        data = gzip.compress(trajectory_csv_text(traj).encode("utf-8"), mtime=0)
-        atomic_write_bytes(HERE / "trajectory" / f"{name}.csv.gz", data)
-    results = simulate(platform, truth, [tr.to_setpoints() for tr in runs.values()],
-                       rate=RATE, sensors=SENSORS, quiet=False)
-    for name, res in zip(runs, results, strict=True):
-        log = res.log
-        log = dataclasses.replace(log, t=np.round(log.t, 6), angles=np.round(log.angles, 7),
-                                  currents=np.round(log.currents, 5))
-        write_log(log, HERE / f"{name}.csv.gz")
-        print(f"{name}: {log.n_samples} samples, {log.duration:.1f} s")
+    write_dataset(HERE, platform, truth, runs, rate=RATE, sensors=SENSORS)
 
 
 if __name__ == "__main__":
