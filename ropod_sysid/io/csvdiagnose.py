@@ -95,21 +95,22 @@ def check_csv_overflow(path: str | Path, columns: dict[str, int], rows: np.ndarr
 
 
 def _diagnose(path: Path, where: str, n_fields: int, wanted: list[str],
-              col_idx: list[int]) -> np.ndarray:
+              col_idx: list[int], sparse: int = 0) -> np.ndarray:
     """Error path: stream the file through Arrow as text, single-threaded so that Arrow knows
     the line numbers; raise for the first bad line, or return the data when nothing is wrong
     but blank-looking lines. Falls back to the csv module if Arrow cannot even do that."""
-    chunks = list(_diagnose_chunks(path, where, n_fields, wanted, col_idx))
+    chunks = list(_diagnose_chunks(path, where, n_fields, wanted, col_idx, sparse))
     if not chunks:
         return np.empty((len(col_idx), 0), dtype=np.float64)
     return np.concatenate(chunks, axis=1)
 
 
 def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
-                     col_idx: list[int]) -> Iterator[np.ndarray]:
+                     col_idx: list[int], sparse: int = 0) -> Iterator[np.ndarray]:
     """:func:`_diagnose` block by block: yields the data of clean blocks as (k, m) arrays and
     raises :class:`InputError` at the first bad line (a wrong field count only once the rows
-    after it show it is not the truncated last line)."""
+    after it show it is not the truncated last line). The last ``sparse`` wanted columns may
+    be empty together in a row (NaN there: a tracker pose between its frames)."""
     import pyarrow.compute as pc  # only the slow, checked path needs it
 
     arrow_names = [f"c{k}" for k in range(n_fields)]
@@ -173,9 +174,16 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
             for c in cols:
                 blank &= pc.equal(c, "").to_numpy(zero_copy_only=False)
             first: tuple[int, int] | None = None
+            group = range(len(col_idx) - sparse, len(col_idx))
+            skip = np.zeros(n, dtype=bool)  # rows whose sparse group is empty
+            if sparse:
+                skip[:] = True
+                for j in group:
+                    skip &= pc.equal(cols[col_idx[j]], "").to_numpy(zero_copy_only=False)
             for j in order:
                 ok = pc.match_substring_regex(cols[col_idx[j]], _FINITE_RE)
-                bad = np.flatnonzero(~ok.to_numpy(zero_copy_only=False) & ~blank)
+                ok = ok.to_numpy(zero_copy_only=False) | (skip if j in group else False)
+                bad = np.flatnonzero(~ok & ~blank)
                 if bad.size and (first is None or bad[0] < first[0]):
                     first = (int(bad[0]), j)
             if first is not None:
@@ -194,10 +202,15 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
             row0 += n
             if not invalid:
                 keep = pa.array(~blank)
+                texts = [cols[k] if j not in group else
+                         pc.replace_substring_regex(cols[k], "^$", "nan")
+                         for j, k in enumerate(col_idx)]
                 data = np.array(
-                    [pc.cast(pc.filter(cols[k], keep), pa.float64()).to_numpy() for k in col_idx],
+                    [pc.cast(pc.filter(c, keep), pa.float64()).to_numpy() for c in texts],
                     dtype=np.float64).reshape(len(col_idx), -1)
                 nonfinite = ~np.isfinite(data)   # numbers too large for a float (1e400)
+                if sparse:
+                    nonfinite[-sparse:, skip[~blank]] = False
                 if nonfinite.any():
                     r = int(np.flatnonzero(nonfinite.any(axis=0))[0])
                     j = next(j for j in order if nonfinite[j, r])
@@ -211,7 +224,7 @@ def _diagnose_chunks(path: Path, where: str, n_fields: int, wanted: list[str],
     except (_NoLineNumbers, pa.ArrowException):
         # Arrow cannot even read it as text: the csv module, row by row (the rows already
         # yielded are skipped)
-        rest = _slow_read(path, where, n_fields, wanted, col_idx)
+        rest = _slow_read(path, where, n_fields, wanted, col_idx, sparse)
         if rest.shape[1] > yielded:
             yield rest[:, yielded:]
         return
@@ -282,8 +295,9 @@ def _value_problem(text: str) -> str | None:
 
 
 def _slow_read(path: Path, where: str, n_fields: int, wanted: list[str],
-               col_idx: list[int]) -> np.ndarray:
-    """Last resort, per-row Python: raise for the first bad line, else return the data."""
+               col_idx: list[int], sparse: int = 0) -> np.ndarray:
+    """Last resort, per-row Python: raise for the first bad line, else return the data (the
+    last ``sparse`` wanted columns may be empty together: NaN)."""
     rows: list[list[float]] = []
     short: tuple[int, int] | None = None   # (line, fields) of a short record, maybe the last
     isfinite = math.isfinite
@@ -302,6 +316,16 @@ def _slow_read(path: Path, where: str, n_fields: int, wanted: list[str],
                 "fix or remove that line (or add the missing column names to the header)"
             )
         fields = [rec[k] for k in col_idx]
+        if sparse and all(not f.strip() for f in fields[-sparse:]):
+            fields[-sparse:] = ["nan"] * sparse
+            try:
+                values = list(map(float, fields))
+                ok = all(map(isfinite, values[:-sparse])) and "_" not in "".join(fields)
+            except ValueError:
+                ok = False
+            if ok:
+                rows.append(values)
+                continue
         try:
             values = list(map(float, fields))
             ok = all(map(isfinite, values)) and "_" not in "".join(fields)

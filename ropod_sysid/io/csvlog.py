@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 
 from ropod_sysid.errors import InputError
@@ -59,20 +60,22 @@ def read_csv_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> 
 
     Columns ``t`` and every unit's channels (for a smart wheel ``u``: ``delta_u``, ``phi_uL``,
     ``phi_uR``, ``cur_uL``, ``cur_uR``; :attr:`ropod_sysid.platform.Platform.layout`) are
-    required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three or
-    none); other columns are ignored. Every problem raises :class:`InputError` with one line that
+    required; ``x_b``, ``y_b``, ``theta_b`` are optional (all three columns or none; a tracker
+    slower than the log leaves all three cells of the rows between its frames empty, read as
+    NaN); other columns are ignored. Every problem raises :class:`InputError` with one line that
     names the file, the line and/or column, and the fix; so does a bad time base
     (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"``: gaps in time are let through).
     """
     where = str(path)
     path = Path(path)
     n_fields, wanted, col_idx, pose_present = _layout(path, where, platform)
+    sparse = len(POSE_COLUMNS) if pose_present else 0
 
-    data = _fast_read(path, n_fields, col_idx)
+    data = _fast_read(path, n_fields, col_idx, sparse)
     if data is None:
         # Arrow stopped, or there is NaN/inf: find the first bad line (raises), or read the
         # oddities the fast reader refuses (whitespace-only lines).
-        data = _diagnose(path, where, n_fields, wanted, col_idx)
+        data = _diagnose(path, where, n_fields, wanted, col_idx, sparse)
 
     _check_rows(where, data.shape[1], MIN_SAMPLES)
     check_times(data[0], where, _line_numbers(path), gaps)
@@ -112,7 +115,8 @@ def _csv_chunks(path: Path, where: str, platform: Platform, chunk_rows: int,
         rows += data.shape[1]
         return _to_log(data, platform, pose_present, where)
 
-    blocks = _stream_data(path, where, n_fields, wanted, col_idx, chunk_rows)
+    blocks = _stream_data(path, where, n_fields, wanted, col_idx, chunk_rows,
+                          len(POSE_COLUMNS) if pose_present else 0)
     for data in _rechunk(blocks, chunk_rows):
         pending.append(data)
         if rows + sum(p.shape[1] for p in pending) >= MIN_SAMPLES:
@@ -319,9 +323,11 @@ def _check_columns(names: list[str], required: list[str], platform: Platform,
     )
 
 
-def _fast_read(path: Path, n_cols: int, col_idx: list[int]) -> np.ndarray | None:
+def _fast_read(path: Path, n_cols: int, col_idx: list[int], sparse: int = 0
+               ) -> np.ndarray | None:
     """All wanted columns as a (k, N) float64 array, or None if Arrow cannot read the file
-    cleanly or a value is NaN or infinite."""
+    cleanly or a value is NaN or infinite. The last ``sparse`` columns form a group whose cells
+    may be empty together (:func:`_sparse_values`: NaN there)."""
     arrow_names = [f"c{k}" for k in range(n_cols)]
     include = [arrow_names[k] for k in col_idx]
     try:
@@ -331,19 +337,41 @@ def _fast_read(path: Path, n_cols: int, col_idx: list[int]) -> np.ndarray | None
             parse_options=pacsv.ParseOptions(delimiter=","),
             convert_options=pacsv.ConvertOptions(
                 column_types={c: pa.float64() for c in include}, include_columns=include,
+                null_values=[""],  # only an empty cell is missing ("nan" is a value)
             ),
         )
     except (pa.ArrowException, ValueError, OSError):
         return None
+    try:
+        return _table_values(table, include, sparse)
+    except _FastFailed:
+        return None
+
+
+def _table_values(table: pa.Table, include: list[str], sparse: int) -> np.ndarray:
+    """The float64 values (k, N) of an Arrow table's columns ``include``; raises
+    :class:`_FastFailed` for a null (an empty cell) or a NaN or infinite value, except that the
+    last ``sparse`` columns may be empty together in a row (then NaN: a tracker pose between its
+    frames)."""
     n = table.num_rows
     out = np.empty((len(include), n), dtype=np.float64)
+    masks = []
     for j, c in enumerate(include):
         col = table.column(c)
-        if col.null_count:
-            return None
+        if j >= len(include) - sparse:
+            masks.append(col.is_null().to_numpy(zero_copy_only=False) if col.null_count
+                         else np.zeros(n, dtype=bool))
+            col = pc.fill_null(col, np.nan) if col.null_count else col
+        elif col.null_count:
+            raise _FastFailed
         float_values(col, out[j])
-    if n and not np.isfinite(out).all():
-        return None
+    finite = np.isfinite(out)
+    if masks:
+        if any(not np.array_equal(m, masks[0]) for m in masks[1:]):
+            raise _FastFailed  # a pose cell given where another one of its row is empty
+        finite[-sparse:, masks[0]] = True
+    if n and not finite.all():
+        raise _FastFailed
     return out
 
 
@@ -367,7 +395,7 @@ class _FastFailed(Exception):
 
 
 def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_bytes: int,
-                 ) -> Iterator[np.ndarray]:
+                 sparse: int = 0) -> Iterator[np.ndarray]:
     """Streaming counterpart of :func:`_fast_read`: the wanted columns, ``block_bytes`` of the
     file at a time; raises :class:`_FastFailed` where Arrow stops or a value is NaN, missing or
     infinite.
@@ -382,7 +410,7 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
     read_options = pacsv.ReadOptions(column_names=arrow_names)
     parse_options = pacsv.ParseOptions(delimiter=",")
     convert_options = pacsv.ConvertOptions(column_types={c: pa.float64() for c in include},
-                                           include_columns=include)
+                                           include_columns=include, null_values=[""])
     with _open(path, where, binary=True) as f:  # noqa: SIM117 - errors of reading, not opening
         with reading(path, where):  # damaged gzip data, I/O errors
             f.readline()  # the header (one line, as _read_header reads it)
@@ -400,32 +428,24 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
                     piece, rest = buf, b""
                 if piece and not piece.isspace():  # (strip() would copy the piece)
                     yield _parse_piece(piece, include, read_options, parse_options,
-                                       convert_options)
+                                       convert_options, sparse)
                 if not data:
                     return
 
 
 def _parse_piece(piece: bytes, include: list[str], read_options: pacsv.ReadOptions,
                  parse_options: pacsv.ParseOptions, convert_options: pacsv.ConvertOptions,
-                 ) -> np.ndarray:
+                 sparse: int = 0) -> np.ndarray:
     try:
         table = pacsv.read_csv(pa.BufferReader(piece), read_options=read_options,
                                parse_options=parse_options, convert_options=convert_options)
     except (pa.ArrowException, ValueError):
         raise _FastFailed from None
-    out = np.empty((len(include), table.num_rows), dtype=np.float64)
-    for j, c in enumerate(include):
-        col = table.column(c)
-        if col.null_count:
-            raise _FastFailed
-        float_values(col, out[j])
-    if out.size and not np.isfinite(out).all():
-        raise _FastFailed
-    return out
+    return _table_values(table, include, sparse)
 
 
 def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_idx: list[int],
-                 chunk_rows: int) -> Iterator[np.ndarray]:
+                 chunk_rows: int, sparse: int = 0) -> Iterator[np.ndarray]:
     """The wanted columns of the data rows, block by block, with the checks of
     :func:`read_csv_log`: fast Arrow blocks while the file is clean; from the first block Arrow
     refuses (or holding NaN/inf) on, :func:`_diagnose_chunks` from the start of the file, which
@@ -433,13 +453,13 @@ def _stream_data(path: Path, where: str, n_fields: int, wanted: list[str], col_i
     block_bytes = max(1 << 16, min(chunk_rows * _row_bytes(path, where), 1 << 28))
     done = 0
     try:
-        for data in _fast_chunks(path, where, n_fields, col_idx, block_bytes):
+        for data in _fast_chunks(path, where, n_fields, col_idx, block_bytes, sparse):
             done += data.shape[1]
             yield data
         return
     except _FastFailed:
         pass
-    for data in _diagnose_chunks(path, where, n_fields, wanted, col_idx):
+    for data in _diagnose_chunks(path, where, n_fields, wanted, col_idx, sparse):
         if done >= data.shape[1]:
             done -= data.shape[1]
             continue
