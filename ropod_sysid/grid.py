@@ -1,12 +1,12 @@
 """Steps 1–2 of the chunked pass (:mod:`ropod_sysid.stream`): unwrapping and the sample grid.
 
 Chunk by chunk, the wrapped unit angles (pivots; and a tracker heading) are unwrapped, continued
-across chunks (bit-identical to one :func:`numpy.unwrap`); the sample time is taken from the head of the log
-(:func:`ropod_sysid.regressor.grid_step`). A log whose steps all stay on it is passed on as
-sampled; a jittered one is put on the uniform grid ``t0 + k dt`` by linear interpolation
-continued across chunks — the grid of the in-memory path. A step off the grid found after the
-head raises :class:`_OffGrid`, on which the pass restarts in resampling mode. The grid samples
-go to a sink (the block reducer of :mod:`ropod_sysid.stream`).
+across chunks (bit-identical to one :func:`numpy.unwrap`); the sample time is taken from the head of
+the log (:func:`ropod_sysid.regressor.grid_step`). A log whose steps all stay on it is passed on as
+sampled; a jittered one is put on the uniform grid ``t0 + k dt`` by linear interpolation continued
+across chunks — the grid of the in-memory path. A step off the grid found after the head raises
+:class:`_OffGrid`, on which the pass restarts in resampling mode. The grid samples go to a sink (the
+block reducer of :mod:`ropod_sysid.stream`).
 """
 
 from __future__ import annotations

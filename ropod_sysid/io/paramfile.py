@@ -293,7 +293,8 @@ def read_truth_parameters(path: str | Path, platform: Platform) -> dict[str, flo
 
     Names must be parameter names of the platform (per-wheel, shared or body-axis friction
     names; see :func:`ropod_sysid.params.parameter_names`). A flat mapping may also carry a
-    ``platform`` name, which is ignored. Parameters not given are left out (the caller decides defaults).
+    ``platform`` name, which is ignored. Parameters not given are left out (the caller decides
+    defaults).
     """
     where = str(path)
     data = _load_mapping(Path(path), where, "parameter file")
