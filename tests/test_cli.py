@@ -207,8 +207,7 @@ def test_other_bad_inputs(tmp_path, files, runs_off_square):
     # a log where nothing moves: the regressor has rank 0
 
     log = runs_off_square[0].log
-    still = with_arrays(log, delta=0 * D(log), phi=0 * P(log),
-                      current=0 * C(log))
+    still = with_arrays(log, delta=0 * D(log), phi=0 * P(log), current=0 * C(log))
     write_log(still, tmp_path / "still.csv")
     one_line_error(run("fit", str(tmp_path / "still.csv"), "--platform", pf, "--out",
                        str(out)), "rank 0")

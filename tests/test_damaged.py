@@ -70,7 +70,7 @@ def there_and_back(log: Log) -> Log:
     def back(a: np.ndarray) -> np.ndarray:
         return np.concatenate([a, a[::-1]])
     return make_log(t, list(log.units), back(D(log)), back(P(log)), back(C(log)),
-               source=log.source)
+                    source=log.source)
 
 
 def cli(*args: str):

@@ -376,8 +376,8 @@ def test_a_gap_after_dropped_frames_names_the_same_frame_whole_and_in_chunks(
 
     a, b = runs_off_square[0].log, runs_off_square[1].log
     gapped = make_log(np.concatenate([a.t, b.t - b.t[0] + a.t[-1] + 10.0]), list(a.units),
-                 np.concatenate([D(a), D(b)]), np.concatenate([P(a), P(b)]),
-                 np.concatenate([C(a), C(b)]))
+                      np.concatenate([D(a), D(b)]), np.concatenate([P(a), P(b)]),
+                      np.concatenate([C(a), C(b)]))
     path = tmp_path / "gapped.mcap"
     write_smartwheel(gapped, path, off_square, encoding=encoding, corrupt=4, seed=5)
     f, _ = raw_frames(gapped, off_square, corrupt=4, seed=5)
