@@ -19,6 +19,7 @@ from ropod_sysid.io import read_log
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.io.mcaplog import scan_mcap
 from ropod_sysid.platform import load_platform, platform_from_dict, save_platform
+from tests.swivel_arrays import C, D, P, with_arrays
 
 SAMPLE = Path(__file__).resolve().parents[1] / "datasets" / "smartwheel"
 
@@ -85,9 +86,9 @@ def test_smartwheel_layout_out_and_back(files, off_square, runs_off_square, out,
     log = runs_off_square[0].log
     got = read_log(back, off_square)
     assert np.allclose(got.t, log.t - log.t[0], rtol=0, atol=1e-12)
-    assert np.array_equal(got.current, log.current)
-    assert np.allclose(np.diff(got.phi, axis=0), np.diff(log.phi, axis=0), rtol=0, atol=1e-12)
-    assert np.allclose(np.cos(got.delta), np.cos(log.delta), rtol=0, atol=1e-12)
+    assert np.array_equal(C(got), C(log))
+    assert np.allclose(np.diff(P(got), axis=0), np.diff(P(log), axis=0), rtol=0, atol=1e-12)
+    assert np.allclose(np.cos(D(got)), np.cos(D(log)), rtol=0, atol=1e-12)
     if out.endswith(".csv"):
         assert (d / out).read_text().startswith("sensors.0.status1,")
 
@@ -106,7 +107,7 @@ def test_inspect_fields(files, runs_off_square):
     assert info["gap_count"] == 0 and info["dropped_frames"] == 0
     log = runs_off_square[0].log
     assert set(info["ranges"]) == set(log.columns())
-    assert info["ranges"]["cur_2R"] == [log.current[:, 1, 1].min(), log.current[:, 1, 1].max()]
+    assert info["ranges"]["cur_2R"] == [C(log)[:, 1, 1].min(), C(log)[:, 1, 1].max()]
     lo, hi = info["velocity_ranges"]["vx"]
     assert 0.8 < hi < 1.05 and lo > -0.05     # 0.6 + 0.4 sin, from rest
     assert set(info["pivot_coverage"]) == {"1", "2", "3", "4"}
@@ -123,9 +124,8 @@ def test_inspect_fields(files, runs_off_square):
 def test_inspect_finds_gaps_and_the_criteria_decide(off_square, runs_off_square):
     log = runs_off_square[1].log
     keep = np.r_[0:600, 640:1000, 1003:log.n_samples]
-    cut = log.slice(0, log.n_samples)
-    cut.t, cut.delta, cut.phi, cut.current = (log.t[keep], log.delta[keep], log.phi[keep],
-                                              log.current[keep])
+    cut = with_arrays(log, delta=D(log)[keep], phi=P(log)[keep], current=C(log)[keep],
+                      t=log.t[keep])
     ins = inspect_log(cut, off_square)
     assert ins.gap_count == 2
     assert [(g.index, round(g.t, 3), round(g.dt, 3)) for g in ins.gaps] == [

@@ -28,6 +28,7 @@ from ropod_sysid.io.smartwheel import REQUIRED_FLOATS, write_smartwheel
 from ropod_sysid.platform import load_platform, save_platform
 from ropod_sysid.simulate import simulate
 from tests.conftest import smooth_setpoints
+from tests.swivel_arrays import C, D, P, make_log
 from tests.test_cli import one_line_error
 
 # Reproducible by default (the same examples on every run, no example database); set
@@ -68,8 +69,8 @@ def there_and_back(log: Log) -> Log:
     t = np.concatenate([log.t, log.t[-1] + (log.t[1] - log.t[0]) + (log.t - log.t[0])])
     def back(a: np.ndarray) -> np.ndarray:
         return np.concatenate([a, a[::-1]])
-    return Log(t, list(log.units), back(log.delta), back(log.phi), back(log.current),
-               source=log.source)
+    return make_log(t, list(log.units), back(D(log)), back(P(log)), back(C(log)),
+                    source=log.source)
 
 
 def cli(*args: str):
@@ -280,11 +281,11 @@ def mcap_with_message(d: Path, path: Path, k: int, replace: tuple[bytes, bytes])
     with open(path, "wb") as f:
         w = new_writer(f)
         sid = w.register_schema(CONTRACT_JSON_SCHEMA, "jsonschema",
-                                json.dumps(contract_json_schema(log.units, False)).encode())
+                                json.dumps(contract_json_schema(log.layout, False)).encode())
         cid = w.register_channel(CONTRACT_TOPIC, "json", sid, {"layout": "ropod_sysid/contract"})
         for j in range(log.n_samples):
-            vals = np.stack([log.delta[j], log.phi[j, :, 0], log.phi[j, :, 1],
-                             log.current[j, :, 0], log.current[j, :, 1]], axis=-1).tolist()
+            vals = np.stack([D(log)[j], P(log)[j, :, 0], P(log)[j, :, 1],
+                             C(log)[j, :, 0], C(log)[j, :, 1]], axis=-1).tolist()
             msg = {"t": float(log.t[j]), "units": {
                 u: dict(zip(UNIT_FIELDS, v, strict=True)) for u, v in zip(log.units, vals,
                                                                           strict=True)}}
@@ -375,9 +376,9 @@ PLATFORM_CASES = {
                  "'units' lists 0 unit(s); at least two needed — list every wheel unit with its "
                  "name and pivot"),
     "units_not_a_list": ({"units": 0}, "'units' must be a list of {name, pivot} entries, got 0"),
-    "unknown_type": ({"unit0_type": "omni"},
-                     "'units[0].type' is 'omni'; known unit types: swivel — use one of them (or "
-                     "leave 'type' out for swivel)"),
+    "unknown_type": ({"unit0_type": "mecanum"},
+                     "'units[0].type' is 'mecanum'; known unit types: swivel, omni — use one of "
+                     "them (or leave 'type' out for swivel)"),
     "nan": ({"wheel_radius": float("nan")},
             "key 'wheel_radius' must be finite, got nan; give its value in SI units"),
     "infinite": ({"torque_constant": float("inf")},
@@ -513,7 +514,7 @@ def check_log(log, path: Path) -> None:
     """What a reader promises about a log it returns."""
     assert log.source == str(path)
     assert np.all(np.diff(log.t) > 0)
-    for a in (log.t, log.delta, log.phi, log.current):
+    for a in (log.t, D(log), P(log), C(log)):
         assert np.isfinite(a).all()
 
 
@@ -540,7 +541,7 @@ def test_fuzz_csv_reader(tmp_path, d, off_square, how):
     check_log(log, path)
     parts, _ = chunked[1]
     np.testing.assert_array_equal(np.concatenate([p.t for p in parts]), log.t)
-    np.testing.assert_array_equal(np.concatenate([p.current for p in parts]), log.current)
+    np.testing.assert_array_equal(np.concatenate([C(p) for p in parts]), C(log))
 
 
 @FUZZ

@@ -11,10 +11,12 @@ from ropod_sysid.io import csvdiagnose, csvlog
 from ropod_sysid.io.csvlog import contract_columns, read_csv_log, write_csv_log
 from ropod_sysid.io.log import Log
 from ropod_sysid.platform import ropod_platform
+from tests.swivel_arrays import C, D, P
+from tests.swivel_arrays import make_log as swivel_log
 
 PLATFORM = ropod_platform()
 UNITS = PLATFORM.unit_names
-COLS = contract_columns(UNITS)  # 21 columns
+COLS = contract_columns(PLATFORM)  # 21 columns
 
 
 @pytest.fixture(autouse=True, params=["arrow", "small-blocks", "csv-module"])
@@ -33,7 +35,7 @@ def locate_mode(request, monkeypatch):
 def make_log(n: int = 8, pose: bool = False, seed: int = 0) -> Log:
     rng = np.random.default_rng(seed)
     k = len(UNITS)
-    return Log(
+    return swivel_log(
         t=0.01 * np.arange(n) + 0.5,
         units=list(UNITS),
         delta=rng.uniform(-np.pi, np.pi, (n, k)),
@@ -75,15 +77,15 @@ def test_round_trip_bit_identical(tmp_path):
     log = make_log(200, pose=True)
     rng = np.random.default_rng(1)
     # awkward floats: random bit patterns, subnormals, signed zero, extremes
-    bits = rng.integers(0, 2**64, size=log.current.size, dtype=np.uint64)
+    bits = rng.integers(0, 2**64, size=C(log).size, dtype=np.uint64)
     cur = bits.view(np.float64).copy()
     cur[~np.isfinite(cur)] = 1.0 / 3.0
     cur[:6] = [0.0, -0.0, 5e-324, -1.7976931348623157e308, 0.1, 2.0**-1060]
-    log.current = cur.reshape(log.current.shape)
+    C(log)[...] = cur.reshape(C(log).shape)
     p = tmp_path / "out" / "log.csv"
     write_csv_log(log, p)
     back = read_csv_log(p, PLATFORM)
-    for name in ("t", "delta", "phi", "current", "pose"):
+    for name in ("t", "angles", "currents", "pose"):
         a, b = getattr(log, name), getattr(back, name)
         assert a.shape == b.shape and b.dtype == np.float64
         assert np.array_equal(a.view(np.uint64), b.view(np.uint64)), name
@@ -99,8 +101,8 @@ def test_round_trip_without_pose(tmp_path):
     write_csv_log(log, p)
     back = read_csv_log(p, PLATFORM)
     assert back.pose is None
-    assert np.array_equal(back.phi, log.phi)
-    assert back.phi.shape == (5, 4, 2) and back.delta.shape == (5, 4)
+    assert np.array_equal(P(back), P(log))
+    assert P(back).shape == (5, 4, 2) and D(back).shape == (5, 4)
 
 
 def test_layout_of_arrays(tmp_path):
@@ -108,13 +110,13 @@ def test_layout_of_arrays(tmp_path):
     row = 2
     assert back.t[row] == 0.2
     # columns: t, delta_1, phi_1L, phi_1R, cur_1L, cur_1R, delta_2, ...
-    assert back.delta[row, 0] == row + 0.01
-    assert back.phi[row, 0, 0] == row + 0.02
-    assert back.phi[row, 0, 1] == row + 0.03
-    assert back.current[row, 0, 0] == row + 0.04
-    assert back.current[row, 0, 1] == row + 0.05
-    assert back.delta[row, 1] == row + 0.06
-    assert back.current[row, 3, 1] == row + 0.20
+    assert D(back)[row, 0] == row + 0.01
+    assert P(back)[row, 0, 0] == row + 0.02
+    assert P(back)[row, 0, 1] == row + 0.03
+    assert C(back)[row, 0, 0] == row + 0.04
+    assert C(back)[row, 0, 1] == row + 0.05
+    assert D(back)[row, 1] == row + 0.06
+    assert C(back)[row, 3, 1] == row + 0.20
 
 
 def test_extra_columns_ignored_and_any_order(tmp_path):
@@ -126,7 +128,7 @@ def test_extra_columns_ignored_and_any_order(tmp_path):
         lines.append(",".join(["hello"] + [vals[c] for c in COLS[::-1]] + ["x y"]))
     back = read_csv_log(write(tmp_path, lines), PLATFORM)
     assert back.t.tolist() == [0.0, 0.1, 0.2, 0.3]
-    assert back.delta[1, 0] == 1.01
+    assert D(back)[1, 0] == 1.01
     assert back.pose is None
 
 
@@ -139,7 +141,7 @@ def test_quotes_whitespace_crlf_blank_lines(tmp_path):
     p = write(tmp_path, [header, rows[0], "", rows[1], rows[2], "", rows[3]], end="\r\n")
     back = read_csv_log(p, PLATFORM)
     assert back.t.tolist() == [0.0, 0.1, 0.2, 0.3]
-    assert back.current[3, 3, 1] == 3.20
+    assert C(back)[3, 3, 1] == 3.20
 
 
 def test_whitespace_only_line_is_blank(tmp_path):
@@ -147,7 +149,7 @@ def test_whitespace_only_line_is_blank(tmp_path):
     lines.insert(3, "   ")
     back = read_csv_log(write(tmp_path, lines), PLATFORM)
     assert back.n_samples == 4
-    assert back.phi[3, 0, 0] == 3.02
+    assert P(back)[3, 0, 0] == 3.02
 
 
 def test_pose_columns_read(tmp_path):
@@ -168,8 +170,9 @@ def test_missing_file(tmp_path):
 def test_empty_file(tmp_path):
     p = tmp_path / "run.csv"
     p.write_text("")
-    assert error_of(p) == (f"{p}: the file is empty; a log needs a header row (t, delta_u, "
-                           "phi_uL, phi_uR, cur_uL, cur_uR) and data rows")
+    assert error_of(p) == (f"{p}: the file is empty; a log needs a header row (t and the unit "
+                           "channels, e.g. delta_u, phi_uL, phi_uR, cur_uL, cur_uR) and data "
+                           "rows")
     p.write_text("\n  \n\n")
     assert "the file is empty" in error_of(p)
 
@@ -316,7 +319,8 @@ def test_unit_names_do_not_match_platform(tmp_path):
     p = write(tmp_path, simple_lines(4, header))
     assert error_of(p) == (f"{p}: the log has columns for units A, B, C, D but the platform "
                            "'ropod' expects units 1, 2, 3, 4; use the platform file that "
-                           "matches the log or rename the columns (delta_u, phi_uL, …)")
+                           "matches the log or rename the columns (t, delta_u, phi_uL, phi_uR, "
+                           "cur_uL, cur_uR for units 1, 2, 3, 4)")
 
 
 def test_too_few_samples(tmp_path):
@@ -386,18 +390,17 @@ def test_gzip_round_trip_is_bit_exact(tmp_path):
     import gzip
 
     from ropod_sysid.io import read_log, write_log
-    from ropod_sysid.io.log import Log
     from ropod_sysid.platform import ropod_platform
 
     pf = ropod_platform()
     rng = np.random.default_rng(3)
     n = 200
-    log = Log(np.arange(n) * 0.01, pf.unit_names, rng.normal(size=(n, 4)),
-              rng.normal(size=(n, 4, 2)), rng.normal(size=(n, 4, 2)))
+    log = swivel_log(np.arange(n) * 0.01, pf.unit_names, rng.normal(size=(n, 4)),
+                     rng.normal(size=(n, 4, 2)), rng.normal(size=(n, 4, 2)))
     path = tmp_path / "run.csv.gz"
     write_log(log, path)
     with gzip.open(path, "rt") as f:
         assert f.readline().startswith("t,delta_1,phi_1L")
     back = read_log(path, pf)
-    for name in ("t", "delta", "phi", "current"):
+    for name in ("t", "angles", "currents"):
         assert np.array_equal(getattr(back, name), getattr(log, name))

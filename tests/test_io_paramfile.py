@@ -20,11 +20,10 @@ from ropod_sysid.params import parameter_names
 from ropod_sysid.platform import ropod_platform
 
 PLATFORM = ropod_platform()
-UNITS = PLATFORM.unit_names
 
 
 def make_pf(extras=None) -> ParameterFile:
-    names = parameter_names(UNITS)
+    names = parameter_names(PLATFORM)
     params = {}
     for k, name in enumerate(names):
         params[name] = {"value": 0.1 * k + 1 / 3, "std": 0.01 * (k + 1) if k % 5 else None}
@@ -63,7 +62,7 @@ def test_json_contract_layout(tmp_path):
     data = strict_json(text)
     assert list(data) == ["platform", "parameters", "rms", "condition_number", "rank",
                           "samples", "friction", "span_s", "input_delay_s", "fixed"]
-    assert list(data["parameters"]) == parameter_names(UNITS)
+    assert list(data["parameters"]) == parameter_names(PLATFORM)
     assert data["parameters"]["m_b"] == {"value": 1 / 3, "std": None}
     assert data["parameters"]["Jzz_b"] == {"value": 0.1 + 1 / 3, "std": 0.02}
     assert data["parameters"]["Jzz_wh"]["combination"] is True
@@ -303,14 +302,14 @@ def test_ros2_bad_value(tmp_path):
 def test_truth_flat_json(tmp_path):
     p = write_json(tmp_path, {"m_b": 35.1, "Jzz_b": 3, "fwv": -0.05, "fpc_3": 0.02,
                               "platform": "ropod"}, "truth.json")
-    assert read_truth_parameters(p, UNITS) == {"m_b": 35.1, "Jzz_b": 3.0, "fwv": -0.05,
+    assert read_truth_parameters(p, PLATFORM) == {"m_b": 35.1, "Jzz_b": 3.0, "fwv": -0.05,
                                                "fpc_3": 0.02}
 
 
 def test_truth_flat_yaml_exponent_without_dot(tmp_path):
     p = tmp_path / "truth.yaml"
     p.write_text("m_b: 35.1\nJrot_w: 1e-3\nfwc_1L: -2E-1\n")
-    assert read_truth_parameters(p, UNITS) == {"m_b": 35.1, "Jrot_w": 0.001, "fwc_1L": -0.2}
+    assert read_truth_parameters(p, PLATFORM) == {"m_b": 35.1, "Jrot_w": 0.001, "fwc_1L": -0.2}
 
 
 @pytest.mark.parametrize("fmt", ["json", "yaml", "ros2"])
@@ -318,26 +317,26 @@ def test_truth_from_parameter_file(tmp_path, fmt):
     pf = make_pf()
     p = tmp_path / f"p.{fmt}"
     write_parameter_file(pf, p, fmt, PLATFORM)
-    assert read_truth_parameters(p, UNITS) == pf.values()
+    assert read_truth_parameters(p, PLATFORM) == pf.values()
 
 
 def test_truth_non_number(tmp_path):
     p = write_json(tmp_path, {"m_b": 35.1, "Jzz_b": "3.8 kg m2"}, "truth.json")
     with pytest.raises(InputError) as exc:
-        read_truth_parameters(p, UNITS)
+        read_truth_parameters(p, PLATFORM)
     assert str(exc.value) == f"{p}: key 'Jzz_b' must be a number, got '3.8 kg m2'"
     p = write_json(tmp_path, {"m_b": None}, "truth.json")
     with pytest.raises(InputError, match="key 'm_b' must be a number, got None"):
-        read_truth_parameters(p, UNITS)
+        read_truth_parameters(p, PLATFORM)
     p = write_json(tmp_path, {"parameters": {"m_b": {"value": True}}}, "truth.json")
     with pytest.raises(InputError, match=r"key 'parameters.m_b.value' must be a number"):
-        read_truth_parameters(p, UNITS)
+        read_truth_parameters(p, PLATFORM)
 
 
 def test_truth_unknown_name(tmp_path):
     p = write_json(tmp_path, {"m_b": 35.1, "fwv_5L": 0.1}, "truth.json")
     with pytest.raises(InputError) as exc:
-        read_truth_parameters(p, UNITS)
+        read_truth_parameters(p, PLATFORM)
     msg = str(exc.value)
     assert msg.startswith(f"{p}: unknown parameter 'fwv_5L'; known names are m_b, Jzz_b")
     assert "for units 1, 2, 3, 4" in msg
@@ -347,9 +346,9 @@ def test_truth_not_finite(tmp_path):
     p = tmp_path / "truth.yaml"
     p.write_text("m_b: .inf\n")
     with pytest.raises(InputError, match="key 'm_b' must be a finite number"):
-        read_truth_parameters(p, UNITS)
+        read_truth_parameters(p, PLATFORM)
 
 
 def test_truth_missing_file(tmp_path):
     with pytest.raises(InputError, match="no such parameter file"):
-        read_truth_parameters(tmp_path / "truth.json", UNITS)
+        read_truth_parameters(tmp_path / "truth.json", PLATFORM)

@@ -28,6 +28,7 @@ from ropod_sysid.io.mcaplog import (
     write_mcap_log,
 )
 from ropod_sysid.platform import platform_from_dict
+from tests.swivel_arrays import C, D, P, with_arrays
 
 ENCODINGS = ("json", "ros2")
 
@@ -56,7 +57,7 @@ def read_quiet(path, platform):
 
 
 def assert_same_log(a, b):
-    for name in ("t", "delta", "phi", "current"):
+    for name in ("t", "angles", "currents"):
         x, y = getattr(a, name), getattr(b, name)
         assert x.shape == y.shape and x.dtype == y.dtype == np.float64
         assert np.array_equal(x.view(np.int64), y.view(np.int64)), name   # bit for bit
@@ -85,15 +86,15 @@ def test_pose_and_awkward_floats_round_trip(tmp_path, off_square, runs_off_squar
     """Subnormals, signed zeros, huge and tiny values and an external pose survive exactly."""
     log = runs_off_square[1].log.slice(0, 50)
     rng = np.random.default_rng(3)
-    delta = log.delta.copy()
+    delta = D(log).copy()
     delta[:5, 0] = [5e-324, -0.0, 1e300, -1.2345678901234567e-200, np.nextafter(1.0, 2.0)]
     pose = rng.normal(size=(50, 3)) * np.array([1e-3, 1e5, 3.0])
-    log = dataclasses.replace(log, delta=delta, pose=pose)
+    log = with_arrays(log, delta=delta, pose=pose)
     path = tmp_path / "pose.mcap"
     write_mcap_log(log, path, encoding)
     back = read_quiet(path, off_square)
     assert_same_log(back, log)
-    assert np.signbit(back.delta[1, 0])
+    assert np.signbit(D(back)[1, 0])
 
 
 def test_fit_on_mcap_equals_fit_on_csv(files, mcap_files, off_square):
@@ -124,7 +125,7 @@ def test_files_carry_schemas_for_viewers(mcap_files, off_square):
         if enc == "json":
             assert (schema.encoding, channel.message_encoding) == ("jsonschema", "json")
             js = json.loads(schema.data)
-            assert js == contract_json_schema(off_square.unit_names, pose=False)
+            assert js == contract_json_schema(off_square.layout, pose=False)
             msg = json.loads(scan.messages[channel.id][0].data)
             assert set(msg) == {"t", "units"} and set(msg["units"]["1"]) == {
                 "delta", "phi_L", "phi_R", "cur_L", "cur_R"}
@@ -319,8 +320,8 @@ def test_wrong_platform_unknown_topic_and_nan_are_one_line_errors(tmp_path, mcap
                                          r"json\)\)"):
         read_mcap_log(path, off_square)
 
-    bad = dataclasses.replace(log, current=log.current.copy())
-    bad.current[7, 2, 1] = np.nan
+    bad = with_arrays(log, current=C(log).copy())
+    C(bad)[7, 2, 1] = np.nan
     write_mcap_log(bad, path, "json")
     with pytest.raises(InputError, match="message 7 has a NaN"):
         read_mcap_log(path, off_square)
@@ -348,11 +349,10 @@ def read_chunked(path, platform, chunk):
             assert "\n" not in str(exc)
             return ("error", str(exc))
     cat = {name: np.concatenate([getattr(p, name) for p in parts])
-           for name in ("t", "delta", "phi", "current")}
+           for name in ("t", "angles", "currents")}
     pose = None if parts[0].pose is None else np.concatenate([p.pose for p in parts])
     notes = [n for p in parts for n in p.notes]
-    log = Log(cat["t"], parts[0].units, cat["delta"], cat["phi"], cat["current"], pose,
-              str(path), notes)
+    log = Log(cat["t"], parts[0].layout, cat["angles"], cat["currents"], pose, str(path), notes)
     return ("ok", log, [str(w.message) for w in caught], [p.n_samples for p in parts])
 
 
@@ -451,9 +451,9 @@ def contract_messages(log, units=None):
     out = []
     for k in range(log.n_samples):
         out.append({"t": float(log.t[k]), "units": units,
-                    "delta": log.delta[k, idx].tolist(), "phi_l": log.phi[k, idx, 0].tolist(),
-                    "phi_r": log.phi[k, idx, 1].tolist(), "cur_l": log.current[k, idx, 0].tolist(),
-                    "cur_r": log.current[k, idx, 1].tolist(), "pose": []})
+                    "delta": D(log)[k, idx].tolist(), "phi_l": P(log)[k, idx, 0].tolist(),
+                    "phi_r": P(log)[k, idx, 1].tolist(), "cur_l": C(log)[k, idx, 0].tolist(),
+                    "cur_r": C(log)[k, idx, 1].tolist(), "pose": []})
     return out
 
 
@@ -525,8 +525,8 @@ def test_json_messages_orjson_refuses_are_read_by_json(tmp_path, off_square, run
     msgs[3]["extra"] = {"note": "ignored"}
     msgs[4]["units"]["1"]["cur_L"] = 2
     msgs[5]["units"]["2"]["cur_R"] = 10**30           # beyond orjson's integers
-    expected = dataclasses.replace(log, current=log.current.copy())
-    expected.current[4, 0, 0], expected.current[5, 1, 1] = 2.0, 1e30
+    expected = with_arrays(log, current=C(log).copy())
+    C(expected)[4, 0, 0], C(expected)[5, 1, 1] = 2.0, 1e30
 
     def write(texts):
         with open(path, "wb") as f:
@@ -543,11 +543,11 @@ def test_json_messages_orjson_refuses_are_read_by_json(tmp_path, off_square, run
     texts = [json.dumps(m).encode() for m in msgs]
     texts[6] = texts[6].replace(b'"t": ', b'"t":\n ', 1)        # JSON over two lines
     texts[7] = re.sub(rb'"phi_L": [^,]+', b'"phi_L": -0', texts[7], count=1)  # Python: 0.0
-    expected.phi[7, 0, 0] = 0.0
+    P(expected)[7, 0, 0] = 0.0
     write(texts)
     back = read_quiet(path, off_square)
     assert_same_log(back, expected)
-    assert not np.signbit(back.phi[7, 0, 0])
+    assert not np.signbit(P(back)[7, 0, 0])
     del msgs[9]["units"]["3"]["delta"]
     write([json.dumps(m).encode() for m in msgs])
     with pytest.raises(InputError, match=r"message 9 lacks a log field \(no 'delta'\)"):

@@ -3,7 +3,6 @@ range, exit status 2, no output file, before any work; results that are no resul
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 
@@ -14,6 +13,7 @@ from ropod_sysid.errors import IdentifiabilityError
 from ropod_sysid.inspect import Criteria
 from ropod_sysid.io import write_log
 from ropod_sysid.solve import Triangles, solve
+from tests.swivel_arrays import C, with_arrays
 from tests.test_cli import files, one_line_error, run  # noqa: F401  (files: a fixture)
 
 SPAN = "a number without 's' is a count of samples and must be an odd whole number ≥ 5"
@@ -192,7 +192,7 @@ def test_all_zero_currents_are_an_error(tmp_path, files, runs_off_square):  # no
     paths = []
     for k, res in enumerate(runs_off_square):
         p = tmp_path / f"quiet{k}.csv"
-        write_log(dataclasses.replace(res.log, current=0 * res.log.current), p)
+        write_log(with_arrays(res.log, current=0 * C(res.log)), p)
         paths.append(str(p))
     out = tmp_path / "p.json"
     r = run("fit", *paths, "--platform", str(d / "platform.yaml"), "--out", str(out))

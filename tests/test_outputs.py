@@ -32,7 +32,7 @@ def files(tmp_path_factory, off_square, truth, runs_off_square):
     """platform.yaml, truth.json, run0.csv, run1.csv, params.json (a fit), traj.csv."""
     d = tmp_path_factory.mktemp("outputs")
     save_platform(off_square, d / "platform.yaml")
-    (d / "truth.json").write_text(json.dumps(truth.to_mapping(off_square.unit_names)))
+    (d / "truth.json").write_text(json.dumps(truth.to_mapping()))
     for k in (0, 1):
         write_log(runs_off_square[k].log, d / f"run{k}.csv")
     r = run("fit", d / "run0.csv", d / "run1.csv", "--platform", d / "platform.yaml", "--out",
@@ -318,7 +318,7 @@ def test_compare_without_report_prints_the_comparison(files, truth, off_square):
             d / "cmp.json", "--compare", d / "truth.json")
     assert r.exit_code == 0, r.output
     fitted = json.loads((d / "cmp.json").read_text())["parameters"]
-    true = truth.to_mapping(off_square.unit_names)
+    true = truth.to_mapping()
     assert "compared with truth.json" in r.output
     row = next(ln for ln in r.output.splitlines() if ln.startswith("fpv_1 "))
     value, std = fitted["fpv_1"]["value"], fitted["fpv_1"]["std"]

@@ -17,7 +17,6 @@ import pytest
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_logs
 from ropod_sysid.io import read_log
-from ropod_sysid.io.log import Log
 from ropod_sysid.io.mcaplog import scan_mcap
 from ropod_sysid.io.smartwheel import (
     REQUIRED_FLOATS,
@@ -29,6 +28,7 @@ from ropod_sysid.io.smartwheel import (
     write_smartwheel,
 )
 from ropod_sysid.platform import Platform, platform_from_dict
+from tests.swivel_arrays import C, D, P, make_log
 
 # fit of the smart-wheel files vs the clean log: relative difference per parameter. The inputs
 # differ only by rounding (unwrapping adds 2πk, t passes through integer nanoseconds); measured
@@ -85,12 +85,12 @@ def test_swapped_flipped_wrapped_and_corrupt_gives_the_clean_fit(tmp_path, clean
         assert label in note
     # the channels themselves: the clean log up to whole turns and rounding
     assert np.allclose(back.t, log.t - log.t[0], rtol=0, atol=1e-12)
-    assert np.array_equal(back.current, log.current)
+    assert np.array_equal(C(back), C(log))
     for i in range(4):
-        assert equal_up_to_turns(back.delta[:, i], log.delta[:, i])
-        assert -np.pi <= back.delta[0, i] < np.pi
+        assert equal_up_to_turns(D(back)[:, i], D(log)[:, i])
+        assert -np.pi <= D(back)[0, i] < np.pi
         for w in range(2):
-            assert equal_up_to_turns(back.phi[:, i, w], log.phi[:, i, w])
+            assert equal_up_to_turns(P(back)[:, i, w], P(log)[:, i, w])
     assert_same_fit(ref, fit_logs([back], pf, FitOptions()))
 
 
@@ -102,7 +102,7 @@ def test_the_settings_matter(tmp_path, clean, off_square):
     with warnings.catch_warnings():
         warnings.simplefilter("error")        # a clean file: nothing dropped, no warning
         wrong = read_log(path, off_square)
-    assert not np.array_equal(wrong.current, log.current)
+    assert not np.array_equal(C(wrong), C(log))
     res = fit_logs([wrong], off_square, FitOptions())
     rel = np.abs(res.solution.values - ref.solution.values) / np.abs(ref.solution.values)
     assert rel.max() > 0.1
@@ -157,13 +157,13 @@ def test_mapping_of_motors_signs_and_pivot_offset():
     log = frames_to_log(fr, two_units(left_motor=2, sign_left=-1, pivot_offset=0.5))
     assert np.array_equal(log.t, np.arange(n) * 1e-3)
     # unit a: default settings
-    assert np.array_equal(log.phi[:, 0, 0], e1) and np.array_equal(log.phi[:, 0, 1], e2)
-    assert np.array_equal(log.current[:, 0], np.stack([c1, c2], axis=1))
-    assert np.allclose(log.delta[:, 0], 0.3)
+    assert np.array_equal(P(log)[:, 0, 0], e1) and np.array_equal(P(log)[:, 0, 1], e2)
+    assert np.array_equal(C(log)[:, 0], np.stack([c1, c2], axis=1))
+    assert np.allclose(D(log)[:, 0], 0.3)
     # unit b: left is motor 2 with a flipped sign, right is motor 1
-    assert np.array_equal(log.phi[:, 1, 0], -e2) and np.array_equal(log.phi[:, 1, 1], e1)
-    assert np.array_equal(log.current[:, 1, 0], -c2) and np.array_equal(log.current[:, 1, 1], c1)
-    assert np.allclose(log.delta[:, 1], 0.3 - 0.5)
+    assert np.array_equal(P(log)[:, 1, 0], -e2) and np.array_equal(P(log)[:, 1, 1], e1)
+    assert np.array_equal(C(log)[:, 1, 0], -c2) and np.array_equal(C(log)[:, 1, 1], c1)
+    assert np.allclose(D(log)[:, 1], 0.3 - 0.5)
     assert log.notes == []
 
 
@@ -174,9 +174,9 @@ def test_wrapped_encoders_are_unwrapped(wrap):
     raw = np.mod(angle, 2 * np.pi) if wrap == "2pi" else np.mod(angle + np.pi, 2 * np.pi) - np.pi
     fr = frames(np.arange(1, n + 1) * 1000, encoder_1=raw, encoder_pivot=raw)
     log = frames_to_log(fr, two_units())
-    assert equal_up_to_turns(log.phi[:, 0, 0], angle, atol=1e-12)
-    assert equal_up_to_turns(log.delta[:, 0], angle, atol=1e-12)
-    assert log.delta[0, 0] == pytest.approx(-7.0 + 2 * np.pi)   # first pivot sample in [−π, π)
+    assert equal_up_to_turns(P(log)[:, 0, 0], angle, atol=1e-12)
+    assert equal_up_to_turns(D(log)[:, 0], angle, atol=1e-12)
+    assert D(log)[0, 0] == pytest.approx(-7.0 + 2 * np.pi)   # first pivot sample in [−π, π)
 
 
 def test_sensor_ts_stays_integer_until_seconds():
@@ -334,7 +334,7 @@ def test_extra_sensors_are_ignored_with_a_note(tmp_path, clean, off_square):
     with pytest.warns(UserWarning, match="has 4 sensors; the first 3 are read as units 1, 2, 3"):
         back = read_log(path, pf3)
     short = dataclasses.replace(log.slice(0, 30))
-    assert np.array_equal(back.current, short.current[:, :3])
+    assert np.array_equal(C(back), C(short)[:, :3])
 
 
 @pytest.mark.parametrize("encoding", ["json", "ros2"])
@@ -358,7 +358,7 @@ def test_smartwheel_mcap_streams_in_chunks(tmp_path, clean, off_square, encoding
         assert [p.n_samples for p in parts[:-1]] == [chunk] * (len(parts) - 1)
         assert 1 <= parts[-1].n_samples <= chunk
         assert all(p.notes == [] for p in parts[:-1]) and parts[-1].notes == whole.notes
-        for name in ("t", "delta", "phi", "current"):
+        for name in ("t", "angles", "currents"):
             joined = np.concatenate([getattr(p, name) for p in parts])
             assert np.array_equal(joined, getattr(whole, name)), (chunk, name)
     with pytest.warns(UserWarning, match="dropped 12 of 1613"):
@@ -375,9 +375,9 @@ def test_a_gap_after_dropped_frames_names_the_same_frame_whole_and_in_chunks(
     from ropod_sysid.io.mcaplog import iter_mcap_log, read_mcap_log
 
     a, b = runs_off_square[0].log, runs_off_square[1].log
-    gapped = Log(np.concatenate([a.t, b.t - b.t[0] + a.t[-1] + 10.0]), list(a.units),
-                 np.concatenate([a.delta, b.delta]), np.concatenate([a.phi, b.phi]),
-                 np.concatenate([a.current, b.current]))
+    gapped = make_log(np.concatenate([a.t, b.t - b.t[0] + a.t[-1] + 10.0]), list(a.units),
+                      np.concatenate([D(a), D(b)]), np.concatenate([P(a), P(b)]),
+                      np.concatenate([C(a), C(b)]))
     path = tmp_path / "gapped.mcap"
     write_smartwheel(gapped, path, off_square, encoding=encoding, corrupt=4, seed=5)
     f, _ = raw_frames(gapped, off_square, corrupt=4, seed=5)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
@@ -11,11 +9,11 @@ from ropod_sysid import grid, regressor, stream
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files, fit_logs
 from ropod_sysid.io.csvlog import iter_csv_log, read_csv_log, write_csv_log
-from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.regressor import Span, preprocess, triangles
 from ropod_sysid.simulate import Sensors, record
 from ropod_sysid.validate import validate_log
+from tests.swivel_arrays import C, D, P, make_log, with_arrays
 
 REL = 1e-10
 
@@ -112,9 +110,8 @@ def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, mo
     jit = jittered(off_square, run)
     t = run.log.t.copy()
     t[800:] = jit.t[800:]
-    log = dataclasses.replace(jit, t=t, delta=np.concatenate([run.log.delta[:800],
-                                                              jit.delta[800:]]),
-                              phi=np.concatenate([run.log.phi[:800], jit.phi[800:]]))
+    log = with_arrays(jit, t=t, delta=np.concatenate([D(run.log)[:800], D(jit)[800:]]),
+                      phi=np.concatenate([P(run.log)[:800], P(jit)[800:]]))
     calls = []
     real = stream._pass
 
@@ -136,7 +133,7 @@ def test_wrapped_angles_tracker_pose_and_input_delay(off_square, runs_off_square
     r = runs_off_square[3]
     wrap = lambda a: np.angle(np.exp(1j * a))  # noqa: E731
     pose = np.column_stack([r.q[:, :2], wrap(r.q[:, 2] * 4)])
-    log = dataclasses.replace(r.log, delta=wrap(r.log.delta + 3.0), pose=pose)
+    log = with_arrays(r.log, delta=wrap(D(r.log) + 3.0), pose=pose)
     model = PlatformModel(off_square)
     for delay in (0.0, 0.012):
         ref = triangles(model, preprocess(log, off_square, None, delay))
@@ -214,7 +211,7 @@ def test_chunks_are_the_whole_log(tmp_path, off_square, small_csv):
     for chunk in (1, 7, 97, 1000):
         parts = list(iter_csv_log(p, off_square, chunk))
         assert all(x.n_samples == chunk for x in parts[:-1])
-        for name in ("t", "delta", "phi", "current"):
+        for name in ("t", "angles", "currents"):
             np.testing.assert_array_equal(
                 np.concatenate([getattr(x, name) for x in parts]), getattr(whole, name))
 
@@ -261,7 +258,7 @@ def test_unknown_format_and_missing_file(tmp_path, off_square):
 
 def test_chunk_of_in_memory_log_keeps_notes(off_square, runs_off_square):
     log = runs_off_square[0].log
-    noted = Log(log.t, log.units, log.delta, log.phi, log.current, None, "noted", ["a note"])
+    noted = make_log(log.t, log.units, D(log), P(log), C(log), None, "noted", ["a note"])
     res = stream.stream_log(noted, off_square, chunk=500)
     assert res.notes == ["a note"]
 

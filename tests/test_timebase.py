@@ -20,6 +20,7 @@ from ropod_sysid.io.paramfile import read_parameter_file, write_parameter_file
 from ropod_sysid.io.smartwheel import write_smartwheel
 from ropod_sysid.io.timebase import TimeBase, split_chunks
 from ropod_sysid.platform import save_platform
+from tests.swivel_arrays import C, D, P, make_log
 from tests.test_cli import one_line_error, run
 
 GAP_FIX = ("a step longer than 5 median steps and 0.02 s is a gap, which resampling would "
@@ -30,9 +31,9 @@ GAP_FIX = ("a step longer than 5 median steps and 0.02 s is a gap, which resampl
 def joined(a: Log, b: Log, gap: float) -> Log:
     """Log ``a``, then ``b`` starting ``gap`` s after a's last sample."""
     tb = b.t - b.t[0] + a.t[-1] + gap
-    return Log(np.concatenate([a.t, tb]), list(a.units), np.concatenate([a.delta, b.delta]),
-               np.concatenate([a.phi, b.phi]), np.concatenate([a.current, b.current]),
-               source="joined")
+    return make_log(np.concatenate([a.t, tb]), list(a.units), np.concatenate([D(a), D(b)]),
+                    np.concatenate([P(a), P(b)]), np.concatenate([C(a), C(b)]),
+                    source="joined")
 
 
 @pytest.fixture(scope="module")
@@ -185,8 +186,8 @@ def test_split_gaps_leaves_out_short_pieces_or_refuses(d, off_square, runs_off_s
 
 def test_split_chunks_cuts_at_gaps_across_chunk_boundaries():
     t = np.r_[np.arange(50) * 0.01, 10 + np.arange(50) * 0.01, 30 + np.arange(3) * 0.01]
-    log = Log(t, ["1"], np.zeros((t.size, 1)), np.zeros((t.size, 1, 2)),
-              np.zeros((t.size, 1, 2)), source="m")
+    log = make_log(t, ["1"], np.zeros((t.size, 1)), np.zeros((t.size, 1, 2)),
+                   np.zeros((t.size, 1, 2)), source="m")
     for chunk in (7, 50, 1000):
         parts = list(split_chunks((log.slice(s, s + chunk) for s in range(0, t.size, chunk)),
                                   "m"))
