@@ -73,10 +73,22 @@ def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
                 gaps: Gaps = "error") -> Iterator[Log]:
     """The samples of a log file (or an in-memory :class:`Log`) as consecutive logs of at most
     ``chunk`` samples, read as they are needed, their time base checked
-    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"`` lets gaps through)."""
-    if isinstance(source, Log):
-        return checked_chunks(_iter_log(source, chunk), TimeBase(source.source, gaps=gaps))
-    return _iter_path(Path(source), platform, chunk, gaps)
+    (:mod:`ropod_sysid.io.timebase`; ``gaps="allow"`` lets gaps through). A pose from a
+    tracker slower than the log is fused with wheel odometry (:mod:`ropod_sysid.tracker`)."""
+    from ropod_sysid.tracker import dense_or_fused
+
+    def read() -> Iterator[Log]:
+        if isinstance(source, Log):
+            return checked_chunks(_iter_log(source, chunk), TimeBase(source.source, gaps=gaps))
+        return _iter_path(Path(source), platform, chunk, gaps)
+
+    def model() -> object:
+        from ropod_sysid.model import PlatformModel
+
+        return PlatformModel(platform)
+
+    # a tracker slower than the log: its pose corrects the odometry's drift (two passes)
+    return dense_or_fused(read(), read, model)
 
 
 def source_name(source: Source) -> str:

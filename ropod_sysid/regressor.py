@@ -35,6 +35,7 @@ from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_angles
 from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.solve import Triangles, qr_triangle
+from ropod_sysid.tracker import with_fused_pose
 
 DEFAULT_SPAN_S = 0.1
 MIN_SPAN_SAMPLES = 5  # the shortest LOESS window of a span given in samples
@@ -332,6 +333,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     """
     span = span or Span.parse(None)
     model = PlatformModel(platform)
+    log = with_fused_pose(log, model)  # a slow tracker corrects the odometry's drift
     notes = list(log.notes)
     t = log.t
     check_times(t, log.source)  # (a log read from a file was checked by its reader)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ropod_sysid.fit import FitOptions, fit_logs
+from ropod_sysid.fit import FitOptions, fit_files, fit_logs
 from ropod_sysid.io import read_log, write_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.base import BODY_FRICTION
@@ -186,3 +186,62 @@ def test_mixed_platform_is_identified() -> None:
     err = errors(result, truth)
     assert result.solution.rank == len(result.solution.names)
     assert max(abs(e) for e in err.values()) < 0.01, err
+
+
+# ------------------------------------------------------------------ a slow overhead tracker
+def tracker_pose(r, rate: float, fps: float = 25.0, seed: int = 5) -> np.ndarray:
+    """The pose a 25 fps tracker with 1 cm and 3° noise (seed 004's) gives, NaN between
+    frames, in the log's frame (zero at the start)."""
+    rng = np.random.default_rng(seed)
+    pose = np.full((r.log.n_samples, 3), np.nan)
+    idx = np.arange(0, r.log.n_samples, int(round(rate / fps)))
+    pose[idx, :2] = r.q[idx, :2] - r.q[0, :2] + rng.normal(0.0, 0.01, (idx.size, 2))
+    pose[idx, 2] = r.q[idx, 2] - r.q[0, 2] + rng.normal(0.0, np.radians(3.0), idx.size)
+    return pose
+
+
+def test_slow_tracker_pose_reads_from_empty_cells_and_fuses_with_odometry(tmp_path,
+                                                                          five_dpo) -> None:
+    """The CSV's pose cells between tracker frames are empty; the fit takes the motion from
+    wheel odometry and the tracker only for drift slower than 10 s, so on a run without slip it
+    gives the odometry's values (a differentiated 25 fps pose would give m_b −99 %)."""
+    import dataclasses
+
+    pf, truth, sims = five_dpo
+    logs = [dataclasses.replace(r.log, pose=tracker_pose(r, 200.0), source=f"tr{k}.csv")
+            for k, r in enumerate(sims)]
+    write_log(logs[0], tmp_path / "tr0.csv", pf)
+    lines = (tmp_path / "tr0.csv").read_text().splitlines()
+    assert lines[0].endswith(",x_b,y_b,theta_b") and lines[2].endswith(",,,")
+    back = read_log(tmp_path / "tr0.csv", pf)
+    np.testing.assert_array_equal(np.isnan(back.pose), np.isnan(logs[0].pose))
+    for k, lg in enumerate(logs[1:], 1):
+        write_log(lg, tmp_path / f"tr{k}.csv", pf)
+    options = FitOptions(input_delay=HALF_STEP)
+    plain = fit_logs([r.log for r in sims], pf, options)
+    fused = fit_logs(logs, pf, options)  # in memory
+    streamed = fit_files([tmp_path / f"tr{k}.csv" for k in range(4)], pf, options)
+    np.testing.assert_allclose(fused.solution.values, plain.solution.values, rtol=5e-3)
+    np.testing.assert_allclose(streamed.solution.values, fused.solution.values, rtol=1e-9)
+    err = errors(fused, truth)
+    assert max(abs(e) for e in err.values()) < 0.01, err
+
+
+def test_slow_tracker_messages(tmp_path, five_dpo) -> None:
+    from ropod_sysid.errors import InputError
+
+    pf, _, sims = five_dpo
+    log = sims[0].log
+    pose = np.full((log.n_samples, 3), np.nan)
+    pose[0] = 0.0
+    import dataclasses
+
+    write_log(dataclasses.replace(log, pose=pose), tmp_path / "one.csv", pf)
+    with pytest.raises(InputError, match=r"one.csv: the pose columns hold 1 tracker frame; give "
+                                         "at least 2"):
+        fit_files([tmp_path / "one.csv"], pf)
+    text = (tmp_path / "one.csv").read_text().splitlines()
+    text[5] = text[5][:-2] + "0.1,,"
+    (tmp_path / "partial.csv").write_text("\n".join(text) + "\n")
+    with pytest.raises(InputError, match="partial.csv: line 6, column 'y_b' is empty"):
+        read_log(tmp_path / "partial.csv", pf)
