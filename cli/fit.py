@@ -133,8 +133,11 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               help="Parameter file to write.")
 @click.option("--format", "fmt", type=click.Choice(["json", "yaml", "ros2", "kelo"]),
               default="json", show_default=True, help="Parameter file format.")
-@click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
-              show_default=True, help="Friction coefficients per wheel and pivot, or shared.")
+@click.option("--friction", type=click.Choice(["per-wheel", "shared", "body"]),
+              default="per-wheel", show_default=True,
+              help="Friction coefficients per wheel and pivot, shared by the wheels (and the "
+                   "pivots) of a unit type, or along the base's own axes (body: fbv_x … fbc_w, "
+                   "the units carrying none).")
 @click.option("--span", type=SpanType(), default=None,
               help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default 0.1s.")
 @click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
