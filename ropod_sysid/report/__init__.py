@@ -351,9 +351,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "version": __version__,
         "platform": {"name": platform.name, "source": platform.source,
                      "units": platform.unit_names, "n_units": platform.n_units,
-                     "types": platform.types,
-                     "unit_table": [row for g in PlatformModel(platform).groups
-                                    for row in g[1].unit_table()]},
+                     "types": platform.types, "unit_groups": _unit_groups(platform)},
         "logs": log_views,
         "samples": int(sum(v["samples"] for v in log_views)),
         "correlation": mean_correlation([lf.triangles for lf in result.logs]),
@@ -389,6 +387,18 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
     }
     return _environment().get_template("report.html").render(**context)
+
+
+def _unit_groups(platform: Platform) -> list[dict[str, Any]]:
+    """The units' geometry and constants for the report, one table per unit type (each type's
+    :meth:`~ropod_sysid.model.units.UnitType.unit_table`), units in platform order."""
+    rows: dict[str, list[dict[str, Any]]] = {}
+    for _, unit in PlatformModel(platform).groups:
+        for row in unit.unit_table():
+            rows.setdefault(str(row["type"]), []).append(row)
+    order = {u: k for k, u in enumerate(platform.unit_names)}
+    return [{"columns": list(rs[0]), "rows": sorted(rs, key=lambda r: order[str(r["name"])])}
+            for _, rs in sorted(rows.items(), key=lambda kv: platform.types.index(kv[0]))]
 
 
 def read_comparison(compare: str | Path | ParameterFile | None, label: str | None,
