@@ -158,7 +158,7 @@ class LogPlot:
     start: np.ndarray  # first and last pose (3,)
     end: np.ndarray
     velocity: tuple[np.ndarray, np.ndarray]  # t (m, 3), q̇ (m, 3)
-    delta: tuple[np.ndarray, np.ndarray]  # t (m, w), unwrapped turning angles (m, w) [rad]
+    turning: tuple[np.ndarray, np.ndarray]  # t (m, w), unwrapped turning angles (m, w) [rad]
     torque: tuple[np.ndarray, np.ndarray]  # t (m, A), actuator torques (m, A) [N m]
     samples: int  # samples the log gave (before resampling)
     duration: float  # [s]
@@ -175,13 +175,13 @@ class PlotGather:
         self.rows = RowSample(max_rows)
         self.path = Envelope(max_points)
         self.velocity = Envelope(max_points)
-        self.delta = Envelope(max_points)
+        self.turning = Envelope(max_points)
         self.torque = Envelope(max_points)
         self.start: np.ndarray | None = None
         self.end: np.ndarray | None = None
         self.widths = (0, 0)  # turning angles, torques
 
-    def push_samples(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, delta: np.ndarray,
+    def push_samples(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray, turning: np.ndarray,
                      torque: np.ndarray) -> None:
         """Consecutive grid samples: pose q (m, 3), q̇ (m, 3), raw unwrapped turning angles
         (the wrapped channels: swivel pivots) (m, w), actuator torques (m, A)."""
@@ -192,9 +192,9 @@ class PlotGather:
         self.end = q[-1].copy()
         self.path.push(q[:, 0], q[:, 1])
         self.velocity.push(t, qd)
-        self.widths = (delta.shape[1], torque.reshape(len(t), -1).shape[1])
-        if delta.shape[1]:  # (fixed wheels have no turning angle)
-            self.delta.push(t, delta)
+        self.widths = (turning.shape[1], torque.reshape(len(t), -1).shape[1])
+        if turning.shape[1]:  # (fixed wheels have no turning angle)
+            self.turning.push(t, turning)
         self.torque.push(t, torque.reshape(len(t), -1))
 
     def push_rows(self, t: np.ndarray, a: np.ndarray, b: np.ndarray, qd: np.ndarray) -> None:
@@ -205,7 +205,7 @@ class PlotGather:
         t, a, b, qd = self.rows.arrays()
         assert self.start is not None and self.end is not None
         w, n_tau = self.widths
-        turning = self.delta.lines(w) if w else (np.zeros((0, 0)), np.zeros((0, 0)))
+        turning = self.turning.lines(w) if w else (np.zeros((0, 0)), np.zeros((0, 0)))
         return LogPlot(t, a, b, qd, self.rows.stride, self.path.lines(), self.start, self.end,
                        self.velocity.lines(3), turning, self.torque.lines(n_tau),
                        samples, duration, has_pose, dt, span_samples, row_step)

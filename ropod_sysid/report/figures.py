@@ -297,9 +297,9 @@ class InputsFigure:
         for d, line in enumerate(self.vel):
             line.set_data(*decimate(plot.velocity[0][:, d], plot.velocity[1][:, d]))
         for i, line in enumerate(self.piv):
-            line.set_data(*decimate(plot.delta[0][:, i], np.degrees(plot.delta[1][:, i])))
+            line.set_data(*decimate(plot.turning[0][:, i], np.degrees(plot.turning[1][:, i])))
         tt, tau = plot.torque
-        for j, line in enumerate(self.tau):  # L, R of each unit
+        for j, line in enumerate(self.tau):  # every actuator
             line.set_data(*decimate(tt[:, j], tau[:, j]))
         return _redraw(self.fig, self.axes)
 
