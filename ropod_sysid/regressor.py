@@ -43,6 +43,9 @@ QR_LEAF_ROWS = 256  # rows per leaf QR of a block's TSQR (small: fast, cache-res
 GRID_STEPS = HEAD_STEPS  # the sample time comes from the first this many steps
 UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
 ROWS_PER_SPAN = 10  # default row grid: about this many equation rows per smoother span
+REST_SPEED = 0.005  # [m/s] below this base speed, turn rate and every unit angle's rate …
+REST_TURN = 0.005  # [rad/s]
+REST_RATE = 0.05  # [rad/s] … the platform stands still (its rows are left out)
 
 
 def grid_step(t: np.ndarray) -> float:
@@ -363,11 +366,31 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
                         grid)
 
 
+def at_rest(pre: Preprocessed) -> np.ndarray:
+    """Samples (M,) at which the platform stands still: base speed below
+    :data:`REST_SPEED`, turn rate below :data:`REST_TURN` and every unit angle's rate below
+    :data:`REST_RATE`."""
+    speed = np.hypot(pre.qd[:, 0], pre.qd[:, 1])
+    return ((speed < REST_SPEED) & (np.abs(pre.qd[:, 2]) < REST_TURN)
+            & (np.abs(pre.angle_rates) < REST_RATE).all(axis=1))
+
+
 def raw_system(model: PlatformModel, pre: Preprocessed,
                friction: Friction = "per-wheel") -> tuple[np.ndarray, np.ndarray]:
-    """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66)."""
+    """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66).
+
+    Rows at rest (:func:`at_rest`) are zero on both sides: standing still, static friction
+    holds whatever torques the drives apply (speed loops holding opposing currents, a
+    controller reset), which the friction model, zero at zero rate, cannot explain; a zero row
+    holds for any parameters, so the rows' filter mixes nothing false into its neighbours.
+    """
     st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
-    return model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
+    a, b = model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
+    rest = at_rest(pre)
+    if rest.any():
+        a[rest] = 0.0
+        b[rest] = 0.0
+    return a, b
 
 
 def row_inputs(pre: Preprocessed, index: np.ndarray, step: int | None = None) -> Preprocessed:
@@ -429,6 +452,7 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
     full = m // QR_LEAF_ROWS * QR_LEAF_ROWS
     r = np.empty((3, p + 1, p + 1))
     rows = np.empty((m, p + 1))
+    kept = int(np.count_nonzero(np.abs(a).sum(axis=(1, 2)) + np.abs(b).sum(axis=1)))
     for d in range(3):
         rows[:, :p] = a[:, d, :]
         rows[:, p] = b[:, d]
@@ -439,7 +463,7 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
         if m > full:
             parts.append(rows[full:])
         r[d] = qr_triangle(np.vstack(parts))
-    return Triangles(r, m, label)
+    return Triangles(r, kept, label)  # (zero rows, at rest, count for nothing)
 
 
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",

@@ -143,7 +143,8 @@ def test_cli_row_step(tmp_path, off_square, runs_off_square):
     data = json.loads(out.read_text())
     assert data["row_step"] == 4
     rows = [lg["rows"] for lg in data["logs"]]
-    assert all(abs(lg["samples"] - 4 * lg["rows"]) < 4 for lg in data["logs"])
+    # a row every 4th sample, less those at rest (the runs start and stop standing still)
+    assert all(0.9 * lg["samples"] < 4 * lg["rows"] < lg["samples"] + 4 for lg in data["logs"])
     assert data["samples"] == sum(lg["samples"] for lg in data["logs"]) > 4 * sum(rows) - 16
     bad = CliRunner().invoke(main, ["fit", *common, "--row-step", "two"])
     assert bad.exit_code == 2
