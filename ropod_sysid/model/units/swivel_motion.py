@@ -1,0 +1,88 @@
+"""Pivot angles of smart-wheel (swivel) units along planned base motions (thesis eq. 8a).
+
+Used by :meth:`ropod_sysid.model.units.swivel.SwivelUnits.predict_angles` and
+:meth:`~ropod_sysid.model.units.swivel.SwivelUnits.quasi_steady_angles` (the trajectory planner,
+check and excitation search). Kinematics (eq. 8a, written in the base frame): pivot i at
+r_i = (x_i, y_i) [m] moves with P_i = (vx − ω y_i, vy + ω x_i) [m/s]; its unit turns towards P_i,
+
+    δ̇_i = |P_i| sin(ψ_i − δ_i) / s_w − ω,        ψ_i = atan2(P_iy, P_ix),
+
+so with the small caster offset s_w [m] the unit trails its pivot (δ_i ≈ ψ_i, stable) and turns
+as fast as the direction ψ_i does. A unit flips (δ_i − ψ_i passes ±π/2 on its way to the stable
+side) when P_i reverses or passes near zero while turning: the transition from the unstable
+"pulling" to the stable "pushing" configuration, which shakes the platform and fits badly (Sec.
+VI-A).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+PULLING = "pulling (wheel flip)"  # the flag of a unit that leads its pivot
+
+
+def pivot_velocities(twist: np.ndarray, pivots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pivot point velocities P_i in the base frame for twists (..., 3): (..., k) x and y."""
+    vx, vy, w = twist[..., 0:1], twist[..., 1:2], twist[..., 2:3]
+    return vx - w * pivots[:, 1], vy + w * pivots[:, 0]
+
+
+def integrate_pivots(t: np.ndarray, tw: np.ndarray, pivots: np.ndarray, s_w: float,
+                     delta0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pivot angles, rates (V, N, k) and ``pulling`` (V, N, k) along twists (V, N, 3) from
+    δ(t_0) = ``delta0`` (V, k).
+
+    The stiff scalar ODE δ̇_i = |P_i| sin(ψ_i − δ_i)/s_w − ω (time constant s_w/|P_i|, 10 ms at
+    1 m/s on the ropod) is integrated with the linearly implicit trapezoidal rule, which is
+    stable at any step for trailing units, in one loop over time steps vectorised over series and
+    units. The rates are eq. 8a's at the integrated angles. ``pulling``: a moving unit leads its
+    pivot (the wheel ahead of the pivot, cos(δ − ψ) < 0 while |P_i| > 1 cm/s).
+    """
+    n_var, n, _ = tw.shape
+    k = len(pivots)
+    px, py = pivot_velocities(tw, pivots)  # (V, N, k)
+    w = np.broadcast_to(tw[..., 2:3], px.shape)
+    # time-major contiguous arrays of the flattened (V·k) state
+    pxt = np.ascontiguousarray(px.transpose(1, 0, 2).reshape(n, -1)) / s_w
+    pyt = np.ascontiguousarray(py.transpose(1, 0, 2).reshape(n, -1)) / s_w
+    wt = np.ascontiguousarray(w.transpose(1, 0, 2).reshape(n, -1))
+    dts = np.diff(np.asarray(t, float))
+    delta = np.empty((n, n_var * k))
+    rate = np.empty((n, n_var * k))
+    x = np.asarray(delta0, float).reshape(-1).copy()
+    cos, sin = np.cos, np.sin
+    for j in range(n - 1):
+        c, s = cos(x), sin(x)
+        f0 = c * pyt[j] - s * pxt[j] - wt[j]
+        f1 = c * pyt[j + 1] - s * pxt[j + 1] - wt[j + 1]
+        jac = -(c * pxt[j + 1] + s * pyt[j + 1])
+        h = dts[j]
+        delta[j] = x
+        rate[j] = f0
+        x = x + h * (f0 + f1) / np.maximum(2.0 - h * jac, 1.0)
+    c, s = cos(x), sin(x)
+    delta[-1] = x
+    rate[-1] = c * pyt[-1] - s * pxt[-1] - wt[-1]
+    delta = delta.reshape(n, n_var, k).transpose(1, 0, 2)
+    rate = rate.reshape(n, n_var, k).transpose(1, 0, 2)
+    speed = np.hypot(px, py)
+    lead = np.cos(delta) * px + np.sin(delta) * py  # P_i along the unit's e_x
+    return delta, rate, (lead < 0) & (speed > 0.01)
+
+
+def quasi_steady(tw: np.ndarray, twd: np.ndarray, pivots: np.ndarray, s_w: float,
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quasi-steady pivot angle, rate and sin(lag) (…, N, k) for twists and their rates
+    (…, N, 3): every unit trails its pivot velocity P_i with the lag that makes eq. 8a hold,
+    sin(ψ_i − δ_i) = s_w (ω + ψ̇_i) / |P_i| — meaningful only while it is well below 1; the rate
+    is ψ̇_i = (P_i × Ṗ_i) / |P_i|²."""
+    px, py = pivot_velocities(tw, pivots)
+    pdx, pdy = pivot_velocities(twd, pivots)
+    p2 = px**2 + py**2
+    speed = np.sqrt(p2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rate = np.where(p2 > 1e-18, (px * pdy - py * pdx) / p2, 0.0)
+        sin_lag = np.where(p2 > 1e-18, s_w * (tw[..., 2:3] + rate)
+                           / np.maximum(speed, 1e-12), 0.0)
+    lag = np.arcsin(np.clip(sin_lag, -1.0, 1.0))
+    return np.arctan2(py, px) - lag, rate, sin_lag
