@@ -217,7 +217,8 @@ class CheckReport:
                    f"{c.condition_number:.4g}")
         if c.rank < len(self.names):
             out.append(f"  condition number (all columns): inf — {len(self.names) - c.rank} "
-                       "combination(s) not identifiable (e.g. symmetric pivots: thesis Sec. VI-C)")
+                       "combination(s) not identifiable (e.g. symmetric unit positions: "
+                       "thesis Sec. VI-C)")
         else:
             out.append(f"  condition number (all columns): {c.condition_number_full:.4g}")
         out.append("")
@@ -227,7 +228,8 @@ class CheckReport:
         for n, v, sd, r in zip(self.names, self.true_values, self.std, self.relative_std,
                                strict=True):
             sd_s = f"{sd:.3g}" if math.isfinite(sd) else "n/a"
-            r_s = f"{100 * r:.3g} %" if math.isfinite(r) else "combined"
+            r_s = (f"{100 * r:.3g} %" if math.isfinite(r) else
+                   "combined" if not math.isfinite(sd) else "value 0")
             out.append(f"{n:<12}{v:>12.4g}{sd_s:>12}{r_s:>12}")
         return "\n".join(out)
 
