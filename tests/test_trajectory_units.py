@@ -4,6 +4,7 @@ mixing smart wheels and omni wheels, and the unit types' angle predictions behin
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.paramfile import read_truth_parameters
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import parameter_names, typical_parameters
-from ropod_sysid.platform import load_platform, platform_from_dict, save_platform
+from ropod_sysid.platform import load_platform, save_platform
 from ropod_sysid.trajectory import (
     VARIANTS,
     Limits,
@@ -28,27 +29,16 @@ from ropod_sysid.trajectory import (
     typical,
     variants,
 )
+from tests.test_units_pipeline import mixed_platform
 
 ROOT = Path(__file__).resolve().parents[1]
 OMNI = ROOT / "datasets" / "omni" / "platform.yaml"
 TRUTH = ROOT / "datasets" / "omni" / "truth.json"
-MIXED = {
-    "name": "mixed", "wheel_radius": 0.0525, "wheel_distance": 0.08, "caster_offset": 0.01,
-    "hub_com_offset": -0.005, "torque_constant": 0.28,
-    "units": [
-        {"name": "1", "type": "omni", "position": [0.25, 0.2], "heading": 2.0,
-         "wheel_radius": 0.05},
-        {"name": "2", "pivot": [-0.21, 0.21]},
-        {"name": "3", "pivot": [-0.21, -0.21]},
-        {"name": "4", "type": "omni", "position": [0.25, -0.2], "heading": 1.0,
-         "wheel_radius": 0.05},
-    ]}
 
 
-def sub_platform(kind: str):
-    """The mixed platform's units of one type only (same settings)."""
-    units = [u for u in MIXED["units"] if u.get("type", "swivel") == kind]
-    return platform_from_dict(dict(MIXED, units=units), f"{kind}.yaml", min_units=1)
+def sub_platform(platform, kind: str):
+    """The platform's units of one type only (same settings)."""
+    return replace(platform, units=tuple(u for u in platform.units if u.type == kind))
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +53,7 @@ def omni_truth(omni):
 
 @pytest.fixture(scope="module")
 def mixed():
-    return platform_from_dict(MIXED, "mixed.yaml")
+    return mixed_platform()
 
 
 def within(traj: Trajectory, limits: Limits) -> None:
@@ -110,13 +100,13 @@ def test_mixed_prediction_is_each_type_in_its_channels(mixed):
     pred = predict_angles(traj.t, twists, mixed)
     lay = mixed.layout
     np.testing.assert_array_equal(pred.turning_units, [False, True, True, False])
-    piv = predict_pivots(traj.t, twists, sub_platform("swivel"))
+    piv = predict_pivots(traj.t, twists, sub_platform(mixed, "swivel"))
     delta = [lay.angle_names.index(f"delta_{u}") for u in "23"]
     np.testing.assert_array_equal(pred.angles[..., delta], piv.delta)
     np.testing.assert_array_equal(pred.turning[..., 1:3], piv.rate)
     assert not piv.pulling.any() and np.abs(piv.rate).max() < 1.5
     assert not pred.flags["pulling (wheel flip)"].any()
-    omni_only = predict_angles(traj.t, twists, sub_platform("omni"))
+    omni_only = predict_angles(traj.t, twists, sub_platform(mixed, "omni"))
     phi = [lay.angle_names.index(f"phi_{u}") for u in "14"]
     np.testing.assert_allclose(pred.angles[..., phi], omni_only.angles, atol=1e-12)
     q, qd, _ = traj.kinematics()
