@@ -2,8 +2,8 @@
 
 Every group of the platform predicts its own angles (:meth:`UnitType.predict_angles`: for the
 swivel the pivot ODE of thesis eq. 8a and its wheel-flip flag; for the omni wheel the integral of
-its wheel rates) and the results are placed in the platform's channel order; the actuator rates
-(:meth:`PlatformModel.actuator_rates`) at the predicted angles give the joint-rate limits. The
+its wheel rates) and the results are placed in the platform's channel order, with the actuator
+rates at the predicted angles (each type's inverse kinematics) for the joint-rate limits. The
 trajectory code asks every group and names no joint.
 """
 
@@ -79,6 +79,7 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
     layout, n_units = model.layout, model.n_units
     angles = np.empty((*lead, layout.n_angles))
     rates = np.empty((*lead, layout.n_angles))
+    act = np.empty((*lead, layout.n_currents))
     turning = np.zeros((*lead, n_units))
     turning_units = np.zeros(n_units, bool)
     flags: dict[str, np.ndarray] = {}
@@ -91,6 +92,7 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
             p = unit.predict_angles(t, tw, start)  # type: ignore[attr-defined]
         angles[..., g.angles] = p.angles
         rates[..., g.angles] = p.rates
+        act[..., g.currents] = p.actuator
         if p.turning is not None:
             turning[..., g.units] = p.turning
             turning_units[g.units] = True
@@ -98,9 +100,7 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
             flags.setdefault(what, np.zeros((*lead, n_units), bool))[..., g.units] = mask
         if lag is not None and p.lag is not None:
             lag[..., g.units] = p.lag
-    flat = angles.reshape(-1, layout.n_angles)
-    act = model.actuator_rates(np.zeros((flat.shape[0], 3)), tw.reshape(-1, 3), flat)
-    return Prediction(angles, rates, act.reshape(*lead, -1), turning, turning_units, flags, lag)
+    return Prediction(angles, rates, act, turning, turning_units, flags, lag)
 
 
 def _variant_prediction(traj: Trajectory, model: object,

@@ -95,6 +95,8 @@ class AnglePrediction:
     """A group's unit angles along V planned motions of N samples (:meth:`UnitType.predict_angles`).
 
     angles, rates : (V, N, k·a) the unit angles [rad] and their rates [rad/s], unit-major
+    actuator : (V, N, k·m) rates of the actuated joints [rad/s] (:meth:`UnitType.actuator_rates`
+        at the predicted angles)
     turning : (V, N, k) rate of each unit's turning joint [rad/s] (the swivel's δ̇), None when
         the type has none
     flags : finding → (V, N, k) bool where a unit is in a state to avoid (the swivel:
@@ -105,6 +107,7 @@ class AnglePrediction:
 
     angles: np.ndarray
     rates: np.ndarray
+    actuator: np.ndarray
     turning: np.ndarray | None = None
     flags: dict[str, np.ndarray] = field(default_factory=dict)
     lag: np.ndarray | None = None

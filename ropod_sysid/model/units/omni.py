@@ -273,7 +273,8 @@ class OmniUnits:
         start = trailing_start(self, tw) if initial is None else np.broadcast_to(
             np.asarray(initial, float).reshape(-1, self.n_units), (n_var, self.n_units))
         angles = integrated(t, rates, start)
-        return AnglePrediction(angles.reshape(*lead, n, -1), rates.reshape(*lead, n, -1))
+        rates = rates.reshape(*lead, n, -1)
+        return AnglePrediction(angles.reshape(*lead, n, -1), rates, rates)
 
     def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray,
                             twist_rates: np.ndarray) -> AnglePrediction:

@@ -390,7 +390,8 @@ class SwivelUnits:
                     delta: np.ndarray, rate: np.ndarray, start: np.ndarray | None,
                     flags: dict[str, np.ndarray]) -> AnglePrediction:
         """Angles and rates (…, N, 3k) of pivot angles and rates (V, N, k) along twists
-        (V, N, 3): wheel rates of eq. 11 (base frame: θ = 0), integrated from ``start``."""
+        (V, N, 3): wheel rates of eq. 11 (base frame: θ = 0; the actuator rates), integrated
+        from ``start``."""
         n_var, n, k = delta.shape
         wheel = self.wheel_rates(np.zeros((n_var * n, 3)), tw.reshape(-1, 3),
                                  delta.reshape(-1, k)).reshape(n_var, n, 2 * k)
@@ -403,7 +404,7 @@ class SwivelUnits:
         rates[..., 1:] = wheel.reshape(n_var, n, k, 2)
         shape = (*lead, n)
         return AnglePrediction(angles.reshape(*shape, 3 * k), rates.reshape(*shape, 3 * k),
-                               rate.reshape(*shape, k),
+                               wheel.reshape(*shape, 2 * k), rate.reshape(*shape, k),
                                {f: m.reshape(*shape, k) for f, m in flags.items()})
 
     # ---------------------------------------------------------------- odometry
