@@ -45,13 +45,10 @@ from ropod_sysid.model.units import (
     Channel,
     FrictionVariant,
     check_variant,
-    integrated,
-    series,
-    trailing_start,
+    swivel_motion,
     unit_major,
 )
 from ropod_sysid.model.units.entry import check_keys, number, resolved, unit_name
-from ropod_sysid.model.units.swivel_motion import PULLING, integrate_pivots, quasi_steady
 
 GEOMETRY = ("wheel_radius", "wheel_distance", "caster_offset", "hub_com_offset")
 KEY_TEXT = {"wheel_radius": "the wheel radius R_w in metres",
@@ -360,52 +357,18 @@ class SwivelUnits:
     # ---------------------------------------------------------------- planned motions
     def predict_angles(self, t: np.ndarray, twists: np.ndarray,
                        initial: np.ndarray | None = None) -> AnglePrediction:
-        """Pivot angles along base-frame twists (…, N, 3) integrated with eq. 8a
-        (:func:`~ropod_sysid.model.units.swivel_motion.integrate_pivots`) from ``initial``
-        (…, 3k) (default: trailing the first motion, :meth:`initial_angles`), the wheel angles
-        integrated from the wheel rates of eq. 11 at them; turning rate δ̇ and the flag
-        ``pulling (wheel flip)``."""
-        tw, lead = series(twists)
-        k = self.n_units
-        if initial is None:
-            start = trailing_start(self, tw)
-        else:
-            start = np.broadcast_to(np.asarray(initial, float).reshape(-1, 3 * k),
-                                    (tw.shape[0], 3 * k))
-        delta, rate, pulling = integrate_pivots(t, tw, self.pivots, self.s_w, start[:, 0::3])
-        return self._prediction(t, tw, lead, delta, rate, start, {PULLING: pulling})
+        """Pivot angles along base-frame twists (…, N, 3) integrated with eq. 8a from
+        ``initial`` (…, 3k) (default: trailing the first motion, :meth:`initial_angles`), the
+        wheel angles integrated from the wheel rates of eq. 11 at them; turning rate δ̇ and the
+        flag ``pulling (wheel flip)`` (:func:`~ropod_sysid.model.units.swivel_motion.predict`)."""
+        return swivel_motion.predict(self, t, twists, initial)
 
     def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray,
                             twist_rates: np.ndarray) -> AnglePrediction:
-        """Every unit trailing its pivot velocity at the quasi-steady lag of eq. 8a
-        (:func:`~ropod_sysid.model.units.swivel_motion.quasi_steady`; δ̇ = ψ̇); wheel angles as
-        in :meth:`predict_angles`."""
-        tw, lead = series(twists)
-        delta, rate, sin_lag = quasi_steady(tw, series(twist_rates)[0], self.pivots, self.s_w)
-        pred = self._prediction(t, tw, lead, delta, rate, None, {})
-        pred.lag = sin_lag.reshape(*lead, *sin_lag.shape[1:])
-        return pred
-
-    def _prediction(self, t: np.ndarray, tw: np.ndarray, lead: tuple[int, ...],
-                    delta: np.ndarray, rate: np.ndarray, start: np.ndarray | None,
-                    flags: dict[str, np.ndarray]) -> AnglePrediction:
-        """Angles and rates (…, N, 3k) of pivot angles and rates (V, N, k) along twists
-        (V, N, 3): wheel rates of eq. 11 (base frame: θ = 0; the actuator rates), integrated
-        from ``start``."""
-        n_var, n, k = delta.shape
-        wheel = self.wheel_rates(np.zeros((n_var * n, 3)), tw.reshape(-1, 3),
-                                 delta.reshape(-1, k)).reshape(n_var, n, 2 * k)
-        phi0 = np.zeros((n_var, 2 * k)) if start is None else \
-            unit_major(start, 3)[..., 1:].reshape(n_var, 2 * k)
-        angles = np.empty((n_var, n, k, 3))
-        rates = np.empty((n_var, n, k, 3))
-        angles[..., 0], rates[..., 0] = delta, rate
-        angles[..., 1:] = integrated(t, wheel, phi0).reshape(n_var, n, k, 2)
-        rates[..., 1:] = wheel.reshape(n_var, n, k, 2)
-        shape = (*lead, n)
-        return AnglePrediction(angles.reshape(*shape, 3 * k), rates.reshape(*shape, 3 * k),
-                               wheel.reshape(*shape, 2 * k), rate.reshape(*shape, k),
-                               {f: m.reshape(*shape, k) for f, m in flags.items()})
+        """Every unit trailing its pivot velocity at the quasi-steady lag of eq. 8a (δ̇ = ψ̇);
+        wheel angles as in :meth:`predict_angles`
+        (:func:`~ropod_sysid.model.units.swivel_motion.predict_quasi_steady`)."""
+        return swivel_motion.predict_quasi_steady(self, t, twists, twist_rates)
 
     # ---------------------------------------------------------------- odometry
     def constraint_rows(self, angles: np.ndarray, rates: np.ndarray

@@ -1,9 +1,10 @@
 """Pivot angles of smart-wheel (swivel) units along planned base motions (thesis eq. 8a).
 
-Used by :meth:`ropod_sysid.model.units.swivel.SwivelUnits.predict_angles` and
+The bodies of :meth:`ropod_sysid.model.units.swivel.SwivelUnits.predict_angles` and
 :meth:`~ropod_sysid.model.units.swivel.SwivelUnits.quasi_steady_angles` (the trajectory planner,
-check and excitation search). Kinematics (eq. 8a, written in the base frame): pivot i at
-r_i = (x_i, y_i) [m] moves with P_i = (vx − ω y_i, vy + ω x_i) [m/s]; its unit turns towards P_i,
+check and excitation search), kept out of the type's module for its size. Kinematics (eq. 8a,
+written in the base frame): pivot i at r_i = (x_i, y_i) [m] moves with
+P_i = (vx − ω y_i, vy + ω x_i) [m/s]; its unit turns towards P_i,
 
     δ̇_i = |P_i| sin(ψ_i − δ_i) / s_w − ω,        ψ_i = atan2(P_iy, P_ix),
 
@@ -16,7 +17,11 @@ VI-A).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+
+from ropod_sysid.model.units import AnglePrediction, integrated, series, trailing_start, unit_major
 
 PULLING = "pulling (wheel flip)"  # the flag of a unit that leads its pivot
 
@@ -86,3 +91,51 @@ def quasi_steady(tw: np.ndarray, twd: np.ndarray, pivots: np.ndarray, s_w: float
                            / np.maximum(speed, 1e-12), 0.0)
     lag = np.arcsin(np.clip(sin_lag, -1.0, 1.0))
     return np.arctan2(py, px) - lag, rate, sin_lag
+
+
+def predict(unit: Any, t: np.ndarray, twists: np.ndarray,
+            initial: np.ndarray | None) -> AnglePrediction:
+    """:meth:`SwivelUnits.predict_angles` of the group ``unit``: :func:`integrate_pivots` from
+    ``initial`` (…, 3k) or the trailing start, wheel angles by :func:`_with_wheels`."""
+    tw, lead = series(twists)
+    k = unit.n_units
+    if initial is None:
+        start = trailing_start(unit, tw)
+    else:
+        start = np.broadcast_to(np.asarray(initial, float).reshape(-1, 3 * k),
+                                (tw.shape[0], 3 * k))
+    delta, rate, pulling = integrate_pivots(t, tw, unit.pivots, unit.s_w, start[:, 0::3])
+    return _with_wheels(unit, t, tw, lead, delta, rate, start, {PULLING: pulling})
+
+
+def predict_quasi_steady(unit: Any, t: np.ndarray, twists: np.ndarray,
+                         twist_rates: np.ndarray) -> AnglePrediction:
+    """:meth:`SwivelUnits.quasi_steady_angles` of the group ``unit``: :func:`quasi_steady`,
+    wheel angles by :func:`_with_wheels` (from zero), ``lag`` set."""
+    tw, lead = series(twists)
+    delta, rate, sin_lag = quasi_steady(tw, series(twist_rates)[0], unit.pivots, unit.s_w)
+    pred = _with_wheels(unit, t, tw, lead, delta, rate, None, {})
+    pred.lag = sin_lag.reshape(*lead, *sin_lag.shape[1:])
+    return pred
+
+
+def _with_wheels(unit: Any, t: np.ndarray, tw: np.ndarray, lead: tuple[int, ...],
+                 delta: np.ndarray, rate: np.ndarray, start: np.ndarray | None,
+                 flags: dict[str, np.ndarray]) -> AnglePrediction:
+    """Angles and rates (…, N, 3k) of pivot angles and rates (V, N, k) along twists
+    (V, N, 3): the wheel rates of eq. 11 (base frame: θ = 0; the actuator rates), integrated
+    from ``start`` (V, 3k) (None: zero)."""
+    n_var, n, k = delta.shape
+    wheel = unit.wheel_rates(np.zeros((n_var * n, 3)), tw.reshape(-1, 3),
+                             delta.reshape(-1, k)).reshape(n_var, n, 2 * k)
+    phi0 = np.zeros((n_var, 2 * k)) if start is None else \
+        unit_major(start, 3)[..., 1:].reshape(n_var, 2 * k)
+    angles = np.empty((n_var, n, k, 3))
+    rates = np.empty((n_var, n, k, 3))
+    angles[..., 0], rates[..., 0] = delta, rate
+    angles[..., 1:] = integrated(t, wheel, phi0).reshape(n_var, n, k, 2)
+    rates[..., 1:] = wheel.reshape(n_var, n, k, 2)
+    shape = (*lead, n)
+    return AnglePrediction(angles.reshape(*shape, 3 * k), rates.reshape(*shape, 3 * k),
+                           wheel.reshape(*shape, 2 * k), rate.reshape(*shape, k),
+                           {f: m.reshape(*shape, k) for f, m in flags.items()})
