@@ -59,5 +59,5 @@ def predict_pivots(t: np.ndarray, twists: np.ndarray, platform: Platform,
         initial[..., 0] = d
         initial = initial.reshape(*d.shape[:-1], -1)
     pred = predict_angles(t, twists, platform, initial)
-    return PivotPrediction(unit_major(pred.angles.reshape(-1, pred.angles.shape[-1]), 3)[
-        ..., 0].reshape(pred.turning.shape), pred.turning, pred.flags[PULLING])
+    # an all-swivel platform's angle channels are δ, φ_L, φ_R per unit (platform order)
+    return PivotPrediction(pred.angles[..., 0::3], pred.turning, pred.flags[PULLING])
