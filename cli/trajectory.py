@@ -29,7 +29,8 @@ OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
 
 
 def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """--v-max, --a-max, --w-max, --alpha-max, --pivot-rate-max/--no-pivot-limit, --floor."""
+    """--v-max, --a-max, --w-max, --alpha-max, --pivot-rate-max/--no-pivot-limit,
+    --wheel-rate-max, --floor."""
     options = [
         click.option("--v-max", default=1.0, show_default=True, type=positive(),
                      help="Speed limit |v| [m/s]."),
@@ -40,9 +41,13 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--alpha-max", default=1.0, show_default=True, type=positive(),
                      help="Rotational acceleration limit |ω̇| [rad/s²]."),
         click.option("--pivot-rate-max", default=1.5, show_default=True, type=positive(),
-                     help="Pivot rate limit |δ̇| [rad/s] (keeps wheel flips out)."),
+                     help="Pivot rate limit |δ̇| [rad/s] of units with a pivot (swivel; keeps "
+                          "wheel flips out)."),
         click.option("--no-pivot-limit", is_flag=True,
                      help="Do not limit the pivot rates."),
+        click.option("--wheel-rate-max", default=None, type=positive("rad/s"),
+                     help="Rate limit |φ̇| of every driven wheel [rad/s] (any unit type) "
+                          "[default: none]."),
         click.option("--floor", nargs=4, type=float, default=None,
                      metavar="XMIN XMAX YMIN YMAX",
                      help="Floor rectangle for the base origin [m], start at (0, 0) "
@@ -54,13 +59,14 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
-            pivot_rate_max: float, no_pivot_limit: bool) -> Any:
+            pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None) -> Any:
     from ropod_sysid.trajectory import Limits
 
     if no_pivot_limit and given("pivot_rate_max"):
         raise InputError(f"--pivot-rate-max {pivot_rate_max:g} and --no-pivot-limit: give one "
                          "of them")
-    return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max)
+    return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max,
+                  wheel_rate_max)
 
 
 def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]:
@@ -118,7 +124,8 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
               type=Number(0, TYPICAL_MAX_DURATION, low_open=True, unit="s"),
               help="Length of the run [s].")
 @click.option("--platform", "platform_path", type=INPUT, default=None,
-              help="Platform YAML for the pivot-rate prediction [default: the ropod].")
+              help="Platform YAML (unit types and geometry: pivots to plan for, wheel rates) "
+                   "[default: the ropod].")
 @click.option("--seed", default=0, show_default=True, type=SEED,
               help="0: the reference run; other seeds vary speeds and lobe order.")
 @output_options
@@ -127,15 +134,17 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
 @writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
         folder_files=OUT_FILES.values())
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
-                    pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
-                    duration: float, platform_path: str | None, seed: int, dt: float, out: str,
-                    quiet: bool) -> None:
+                    pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
+                    floor: tuple[float, ...], duration: float, platform_path: str | None,
+                    seed: int, dt: float, out: str, quiet: bool) -> None:
     """Write a typical run and its three variants (mirrored, negated, mirrored-negated)."""
     from ropod_sysid.trajectory import typical
 
-    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
+                     wheel_rate_max)
     traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
-                   _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path))
+                   _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path),
+                   limits.wheel_rate_max)
     written = _write_variants(traj, out)
     if not quiet:
         click.echo(f"typical run: {traj.duration:g} s, {traj.n_samples} setpoints; wrote "
@@ -145,7 +154,8 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @command.command("optimize", short_help="An optimised run (Fourier series, min. condition).")
 @limit_options
 @click.option("--platform", "platform_path", required=True, type=INPUT,
-              help="Platform YAML (geometry for the regressor and the pivot rates).")
+              help="Platform YAML (unit types and geometry for the regressor and the "
+                   "predicted pivot and wheel rates).")
 @click.option("--duration", default=30.0, show_default=True,
               type=Number(OPTIMIZE_DURATION[0], OPTIMIZE_DURATION[1], unit="s"),
               help="Length of the run [s].")
@@ -164,13 +174,15 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
         folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
-                     pivot_rate_max: float, no_pivot_limit: bool, floor: tuple[float, ...],
-                     platform_path: str, duration: float, harmonics: int, objective: str,
-                     seed: int, maxiter: int, dt: float, out: str, quiet: bool) -> None:
+                     pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
+                     floor: tuple[float, ...], platform_path: str, duration: float,
+                     harmonics: int, objective: str, seed: int, maxiter: int, dt: float,
+                     out: str, quiet: bool) -> None:
     """Search a run whose stacked regressor is best conditioned; write it and its variants."""
     from ropod_sysid.trajectory import optimize
 
-    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
+                     wheel_rate_max)
     platform = load_platform(platform_path)
     result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
                       _floor(floor), progress=not quiet, dt=dt)
@@ -184,7 +196,8 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
         click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
-@command.command("check", short_help="Limits, floor, pivot rates and predicted accuracy.")
+@command.command("check", short_help="Limits, floor, pivot and wheel rates, predicted "
+                                     "accuracy.")
 @click.argument("traj_path", metavar="TRAJ.csv", type=INPUT)
 @click.option("--platform", "platform_path", required=True, type=INPUT,
               help="Platform YAML (geometry).")
@@ -193,10 +206,13 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="White noise σ on b_ID for the predicted standard deviations [N, N m].")
 @click.option("--log-rate", default=100.0, show_default=True, type=positive("Hz"),
               help="Sample rate of the logs the fit will use [Hz].")
-@click.option("--friction", type=click.Choice(["per-wheel", "shared"]), default="per-wheel",
-              show_default=True, help="Friction coefficients per wheel or shared.")
+@click.option("--friction", type=click.Choice(["per-wheel", "shared", "body"]),
+              default="per-wheel", show_default=True,
+              help="Friction coefficients per wheel, shared, or per body axis.")
 @click.option("--params", "params_path", type=INPUT, default=None,
-              help="True parameter values for relative stds [default: thesis fixed masses].")
+              help="True parameter values for relative stds; m_b and Jzz_b alone: the rest "
+                   "each unit type's typical values [default: thesis fixed masses, smart-wheel "
+                   "platforms only].")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Plot of the path and the setpoints (.png or .svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
@@ -206,14 +222,17 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                 "params_path": "--params"})
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
-                  floor: tuple[float, ...], noise: float, log_rate: float, friction: str,
+                  wheel_rate_max: float | None, floor: tuple[float, ...], noise: float,
+                  log_rate: float, friction: str,
                   params_path: str | None, plot_path: str | None, as_json: bool) -> None:
-    """Check a setpoint CSV before a run: limits broken and where, pivot rates, the predicted
-    condition number and rank of the four variants' stacked regressor, and the predicted
-    standard deviation of every parameter. Findings are reported, not errors (exit 0)."""
+    """Check a setpoint CSV before a run: limits broken and where, pivot rates and wheel flips
+    (units with a pivot), wheel rates (every driven wheel), the predicted condition number and
+    rank of the four variants' stacked regressor, and the predicted standard deviation of every
+    parameter. Findings are reported, not errors (exit 0)."""
     from ropod_sysid.trajectory import check, plot, read_trajectory_csv
 
-    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit)
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
+                     wheel_rate_max)
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
     platform = load_platform(platform_path)

@@ -10,7 +10,10 @@ out the transition of a wheel unit from its unstable "pulling" to its stable "pu
 configuration, which shakes the platform and fits badly; the disturbance observer ignores the
 data when a pivot rate exceeds 1.5 rad/s for the same reason (Sec. VII-C).
 
-Kinematics used throughout (thesis eq. 8a, written in the base frame): pivot i at r_i = (x_i, y_i)
+The unit angles along a planned motion are each unit type's business
+(:meth:`UnitType.predict_angles`): the trajectory code asks every group of any mix of types and
+names no joint. For smart-wheel (swivel) units the kinematics is (thesis eq. 8a, written in the
+base frame): pivot i at r_i = (x_i, y_i)
 moves with P_i = (vx − ω y_i, vy + ω x_i); its unit turns towards P_i,
 
     δ̇_i = |P_i| sin(ψ_i − δ_i) / s_w − ω,        ψ_i = atan2(P_iy, P_ix),
@@ -19,7 +22,9 @@ so with the small caster offset s_w the unit trails its pivot (δ_i ≈ ψ_i, st
 fast as the direction ψ_i does. A unit flips (δ_i − ψ_i passes ±π/2 on its way to the stable
 side) when P_i reverses or passes near zero while turning. Limits, as in the thesis's
 experiments: |v| = |(vx, vy)| ≤ v_max, |a| ≤ a_max (the world acceleration of the base origin,
-centripetal part included), |ω| ≤ ω_max, |ω̇| ≤ α_max, |δ̇_i| ≤ pivot_rate_max.
+centripetal part included), |ω| ≤ ω_max, |ω̇| ≤ α_max, |δ̇_i| ≤ pivot_rate_max (units with a
+turning joint) and optionally |φ̇| ≤ wheel_rate_max for every driven wheel. Omni wheels have no
+turning joint: there are no wheel flips to plan for.
 
 Modules (every public name is re-exported here):
 
@@ -27,11 +32,13 @@ Modules (every public name is re-exported here):
 * :mod:`~ropod_sysid.trajectory.setpoints` — :class:`Trajectory`, :func:`integrate_pose` and the
   setpoint CSV (:func:`read_trajectory_csv`, :func:`write_trajectory_csv`);
 * :mod:`~ropod_sysid.trajectory.run_variants` — :func:`variant`, :func:`variants`;
-* :mod:`~ropod_sysid.trajectory.pivots` — :func:`predict_pivots` (eq. 8a);
+* :mod:`~ropod_sysid.trajectory.prediction` — :func:`predict_angles` (every unit type);
+* :mod:`~ropod_sysid.trajectory.pivots` — :func:`predict_pivots` (eq. 8a, all-swivel platforms);
 * :mod:`~ropod_sysid.trajectory.blends` — minimum-jerk twist programs;
 * :mod:`~ropod_sysid.trajectory.typical_run` — :func:`typical`;
 * :mod:`~ropod_sysid.trajectory.identifiability` — :func:`conditioning`, :func:`predicted_std`;
-* :mod:`~ropod_sysid.trajectory.precheck` — :func:`check` (limits, floor, pivot rates, the
+* :mod:`~ropod_sysid.trajectory.precheck` — :func:`check` (limits, floor, pivot and wheel
+  rates, the
   predicted stacked regressor's condition number and rank and each parameter's predicted
   standard deviation);
 * :mod:`~ropod_sysid.trajectory.plotting` — :func:`plot`;
@@ -70,7 +77,8 @@ from ropod_sysid.trajectory.limits import (
 from ropod_sysid.trajectory.limits import _check_floor as _check_floor
 from ropod_sysid.trajectory.pivots import PivotPrediction, predict_pivots, trailing_pivots
 from ropod_sysid.trajectory.plotting import plot
-from ropod_sysid.trajectory.precheck import CheckReport, Finding, check
+from ropod_sysid.trajectory.precheck import CheckReport, Finding, check, true_parameters
+from ropod_sysid.trajectory.prediction import Prediction, predict_angles, trailing_points
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, variant, variants
 from ropod_sysid.trajectory.setpoints import (
     COLUMNS,
@@ -96,8 +104,9 @@ __all__ = [
     "RHO_BETA", "RHO_KAPPA", "SPEED_WEIGHT", "SPIN_START_MIN", "TWIST_COLUMNS",
     "TYPICAL_MAX_DURATION", "VARIANTS", "VARIANT_SIGNS",
     "CheckReport", "Conditioning", "Finding", "Floor", "FourierFamily", "Limits",
-    "OptimizeResult", "PivotPrediction", "PlanningError", "Trajectory",
-    "check", "conditioning", "integrate_pose", "optimize", "plot", "predict_pivots",
-    "predicted_std", "read_trajectory_csv", "trailing_pivots", "trajectory_csv_text", "typical",
+    "OptimizeResult", "PivotPrediction", "PlanningError", "Prediction", "Trajectory",
+    "check", "conditioning", "integrate_pose", "optimize", "plot", "predict_angles",
+    "predict_pivots", "predicted_std", "read_trajectory_csv", "trailing_pivots",
+    "trailing_points", "trajectory_csv_text", "true_parameters", "typical",
     "variant", "variants", "write_trajectory_csv",
 ]

@@ -3,8 +3,10 @@
 :func:`optimize` searches the coefficients of a run of
 :class:`~ropod_sysid.trajectory.fourier.FourierFamily` with scipy's differential evolution for
 the best condition number (or log-determinant) of the stacked regressor A_ID,ext of the four
-variants (Sec. VI-A, VI-C), units trailing their pivots (quasi-steady eq. 8a), within the limits
-[m/s, m/s², rad/s, rad/s²] and the floor [m].
+variants (Sec. VI-A, VI-C), unit angles in each type's quasi-steady closed form
+(:meth:`UnitType.quasi_steady_angles`: swivel units trailing their pivots, eq. 8a; omni wheels
+integrating their rates), within the limits [m/s, m/s², rad/s, rad/s², and optionally the wheel
+rates] and the floor [m]. Any mix of unit types.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.model.units.swivel import angles_of, check_all_swivel
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.fourier import FourierFamily, _scaled_twist
 from ropod_sysid.trajectory.identifiability import _world_motion, conditioning
@@ -28,8 +29,8 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
-from ropod_sysid.trajectory.pivots import _pivot_velocities, predict_pivots
-from ropod_sysid.trajectory.precheck import check
+from ropod_sysid.trajectory.precheck import stacked_regressor
+from ropod_sysid.trajectory.prediction import _variant_prediction, predict_angles
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -78,16 +79,14 @@ class _Objective:
 
         self.platform = platform
         self.model = PlatformModel(platform)
-        check_all_swivel(platform, "trajectory optimize")
-        self.pivots = platform.positions
-        self.s_w = platform.units[0].caster_offset
+        self.positions = platform.positions
         self.limits = limits
         self.floor = floor
         self.objective = objective
         self.friction = friction
         n = int(math.ceil(duration * grid_rate))
         self.t = np.linspace(0.0, duration, n + 1)
-        r_max = float(np.linalg.norm(self.pivots, axis=1).max())
+        r_max = float(np.linalg.norm(self.positions, axis=1).max())
         self.family = FourierFamily(duration, harmonics, self.t, r_max,
                                     limits.pivot_rate_max or 1.5)
         step = max(int(round(grid_rate / eval_rate)), 1)
@@ -110,41 +109,30 @@ class _Objective:
         self.evaluations += coef.shape[0]
         return out
 
-    def pivots_quasi_steady(self, tw: np.ndarray, twd: np.ndarray,
-                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Quasi-steady pivot angle, rate and sin(lag) (…, N, n) for twists (…, N, 3): every
-        unit trails its pivot velocity P_i with the lag that makes eq. 8a hold,
-        sin(ψ_i − δ_i) = s_w (ω + ψ̇_i) / |P_i| — meaningful only while it is well below 1."""
-        px, py = _pivot_velocities(tw, self.pivots)
-        pdx, pdy = _pivot_velocities(twd, self.pivots)
-        p2 = px**2 + py**2
-        speed = np.sqrt(p2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rate = np.where(p2 > 1e-18, (px * pdy - py * pdx) / p2, 0.0)
-            sin_lag = np.where(p2 > 1e-18, self.s_w * (tw[..., 2:3] + rate)
-                               / np.maximum(speed, 1e-12), 0.0)
-        lag = np.arcsin(np.clip(sin_lag, -1.0, 1.0))
-        return np.arctan2(py, px) - lag, rate, sin_lag
-
     def _batch(self, coef: np.ndarray) -> np.ndarray:
         tw, twd, _ = self.twist(coef)
         signs = np.array([VARIANT_SIGNS[v] for v in VARIANTS])  # (4, 3)
         tw_v = tw[:, None] * signs[None, :, None, :]
         twd_v = twd[:, None] * signs[None, :, None, :]
-        delta, rate, sin_lag = self.pivots_quasi_steady(tw_v, twd_v)
-        lag = np.abs(sin_lag[:, :2]).max(axis=(1, 2, 3))  # negated variants: the same
+        pred = predict_angles(self.t, tw_v, self.model, twist_rates=twd_v)
+        assert pred.lag is not None
+        lag = np.abs(pred.lag[:, :2]).max(axis=(1, 2, 3))  # negated variants: the same
         penalty = np.maximum(lag / MAX_LAG - 1.0, 0.0)
         if self.limits.pivot_rate_max is not None:
-            peak = np.abs(rate[:, :2]).max(axis=(1, 2, 3))
+            peak = np.abs(pred.turning[:, :2]).max(axis=(1, 2, 3))
             penalty += np.maximum(peak / (PIVOT_DESIGN_MARGIN * self.limits.pivot_rate_max)
+                                  - 1.0, 0.0)
+        if self.limits.wheel_rate_max is not None:
+            wheel = np.abs(pred.actuator_rates).max(axis=(1, 2, 3))
+            penalty += np.maximum(wheel / (PIVOT_DESIGN_MARGIN * self.limits.wheel_rate_max)
                                   - 1.0, 0.0)
         idx = self.eval_idx
         q, qd, qdd = _world_motion(self.t, tw_v, twd_v)
-        n_s, n_u = coef.shape[0], self.pivots.shape[0]
-        # pivot rates from the constraint (eq. 8a) at the quasi-steady angles: consistent
-        # kinematics, so the structural rank deficiency shows exactly
+        n_s = coef.shape[0]
+        # angle rates from the constraints (the swivel's eq. 8a) at the quasi-steady angles:
+        # consistent kinematics, so the structural rank deficiency shows exactly
         st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, 3),
-                              angles_of(delta[:, :, idx].reshape(-1, n_u)))
+                              pred.angles[:, :, idx].reshape(n_s * 4 * idx.size, -1))
         a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, 3),
                                 self.friction)  # type: ignore[arg-type]
         a = a.reshape(n_s, -1, a.shape[-1])
@@ -186,7 +174,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     * ``"logdet"`` — the log-determinant of the column-scaled information matrix on that
       subspace, maximised.
 
-    Pivot rates above 80 % of their limit, and quasi-steady lags of a unit behind its pivot with
+    Pivot rates (units with a turning joint) and, with a wheel-rate limit, wheel rates above
+    80 % of their limit, and quasi-steady lags of a unit behind its pivot with
     sin > 0.35 (a unit cannot follow a pivot that barely moves), are penalised; −0.5 log(mean
     speed / v_max) is added as a tie-breaker towards brisk runs, which the column-scaled
     regressor cannot see. scipy's differential evolution searches
@@ -195,7 +184,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
 
     Parameters
     ----------
-    platform : geometry (pivots, caster offset) for the regressor and the pivot rates
+    platform : unit types and geometry for the regressor and the predicted angles
     duration : length of the run [s]; harmonics : H, harmonics per DOF (base period = duration)
     objective : ``"cond"`` or ``"logdet"``; seed : random seed (repeatable)
     maxiter : generations of the search; popsize : population = popsize × 3(2H+1) candidates
@@ -210,6 +199,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
 
     import scipy.optimize
 
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.model.units import check_variant
     from ropod_sysid.progress import Progress
 
     limits = limits or Limits()
@@ -225,8 +216,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
         raise InputError(f"duration must be between {lo:g} and {hi:g} s, got {duration!r}")
     if isinstance(maxiter, bool) or not isinstance(maxiter, int) or maxiter < 1:
         raise InputError(f"maxiter must be a positive integer, got {maxiter!r}")
-    if friction not in ("per-wheel", "shared"):
-        raise InputError(f"unknown friction model {friction!r}; use per-wheel or shared")
+    check_variant(friction)
     t_start = time.monotonic()
     obj = _Objective(platform, float(duration), harmonics, limits, floor, objective, friction,
                      grid_rate=10.0, eval_rate=2.0)
@@ -266,15 +256,18 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
         raise PlanningError(f"no optimised run within the limits ({why_first}); try another "
                             "seed, more maxiter or a longer duration")
     coef, traj, s_v, value = chosen
-    rep = check(traj, platform, limits, floor, friction=friction)
-    return OptimizeResult(traj, objective, value, rep.condition_number, rep.rank,
+    model = PlatformModel(platform)
+    cond = conditioning(stacked_regressor(*_variant_prediction(traj, model), model,
+                                          friction)[0])
+    return OptimizeResult(traj, objective, value, cond.condition_number, cond.rank,
                           obj.rank or 0, coef.reshape(3, -1), s_v, obj.evaluations,
                           generations, time.monotonic() - t_start, notes)
 
 
 def _verify(traj: Trajectory, platform: Platform, limits: Limits,
             floor: Floor) -> tuple[bool, str]:
-    """Limits, floor (four variants) and integrated pivot rates of a run on its own grid."""
+    """Limits, floor (four variants) and the integrated turning rates, flags and wheel rates
+    of a run on its own grid."""
     rates = traj.twist_rates()
     if traj.speed().max() > limits.v_max:
         return False, "speed"
@@ -286,9 +279,13 @@ def _verify(traj: Trajectory, platform: Platform, limits: Limits,
     off = _off_floor(var, floor)
     if off is not None:
         return False, f"floor ({off})"
-    if limits.pivot_rate_max is not None:
-        pred = predict_pivots(traj.t, np.stack([vt.twist() for vt in var.values()]), platform)
-        peak = float(np.abs(pred.rate).max())
-        if peak > limits.pivot_rate_max or pred.pulling.any():
+    if limits.pivot_rate_max is not None or limits.wheel_rate_max is not None:
+        pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]), platform)
+        peak = pred.turning_peak
+        if limits.pivot_rate_max is not None and (peak > limits.pivot_rate_max
+                                                  or pred.flagged):
             return False, f"pivot rate {peak:.2f} rad/s"
+        wheel = float(np.abs(pred.actuator_rates).max())
+        if limits.wheel_rate_max is not None and wheel > limits.wheel_rate_max:
+            return False, f"wheel rate {wheel:.3g} rad/s"
     return True, ""

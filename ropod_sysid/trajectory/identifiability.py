@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ropod_sysid.model.units.swivel import angles_of
 from ropod_sysid.trajectory.setpoints import integrate_pose
 
 
@@ -38,12 +37,13 @@ def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = N
 
 
 def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                    delta: np.ndarray, friction: str, chunk: int = 20000) -> np.ndarray:
-    """A_ID,ext (M, 3, p) at M samples (chunked to bound the memory)."""
+                    angles: np.ndarray, friction: str, chunk: int = 20000) -> np.ndarray:
+    """A_ID,ext (M, 3, p) at M samples with unit angles (M, J) (chunked to bound the memory);
+    the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a)."""
     out = []
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
-        st = model.state(q[sl], qd[sl], angles_of(delta[sl]))  # type: ignore[attr-defined]
+        st = model.state(q[sl], qd[sl], angles[sl])  # type: ignore[attr-defined]
         out.append(model.a_id_ext(st, qdd[sl], friction))  # type: ignore[attr-defined]
     return np.concatenate(out, axis=0)
 

@@ -2,8 +2,10 @@
 
 Limits, as in the thesis's experiments: |v| = |(vx, vy)| ≤ v_max [m/s], |a| ≤ a_max [m/s²] (the
 world acceleration of the base origin, centripetal part included), |ω| ≤ ω_max [rad/s],
-|ω̇| ≤ α_max [rad/s²], |δ̇_i| ≤ pivot_rate_max [rad/s] (the disturbance observer ignores the data
-above 1.5 rad/s, Sec. VII-C). The floor is the rectangle (x_min, x_max, y_min, y_max) [m] the base
+|ω̇| ≤ α_max [rad/s²], |δ̇_i| ≤ pivot_rate_max [rad/s] for units with a turning joint (the
+swivel's pivot; the disturbance observer ignores the data above 1.5 rad/s, Sec. VII-C) and,
+optionally, |φ̇| ≤ wheel_rate_max [rad/s] for every actuated joint (the units' ``actuator_rates``,
+e.g. a motor's top speed). The floor is the rectangle (x_min, x_max, y_min, y_max) [m] the base
 origin must stay in, in the world frame of the planned pose (start at the origin). A run that
 cannot be planned within them raises :class:`PlanningError`.
 """
@@ -37,8 +39,11 @@ class Limits:
     alpha_max : float
         Rotational acceleration |ω̇| [rad/s²].
     pivot_rate_max : float or None
-        Pivot rate |δ̇_i| of every unit [rad/s], predicted with the kinematic model; None: no
-        limit (wheel flips allowed).
+        Pivot rate |δ̇_i| of every unit with a turning joint (the swivel) [rad/s], predicted
+        with the kinematic model; None: no limit (wheel flips allowed).
+    wheel_rate_max : float or None
+        Rate |φ̇| of every actuated joint (driven wheel) [rad/s], predicted with the units'
+        inverse kinematics; None (default): no limit.
     """
 
     v_max: float = 1.0
@@ -46,11 +51,13 @@ class Limits:
     w_max: float = 1.0
     alpha_max: float = 1.0
     pivot_rate_max: float | None = 1.5
+    wheel_rate_max: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("v_max", "a_max", "w_max", "alpha_max", "pivot_rate_max"):
+        for name in ("v_max", "a_max", "w_max", "alpha_max", "pivot_rate_max",
+                     "wheel_rate_max"):
             value = getattr(self, name)
-            if value is None and name == "pivot_rate_max":
+            if value is None and name in ("pivot_rate_max", "wheel_rate_max"):
                 continue
             if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
                 raise InputError(f"limit {name} must be a positive number, got {value!r}")
@@ -60,7 +67,8 @@ class Limits:
         pf = factor if pivot_factor is None else pivot_factor
         return Limits(self.v_max * factor, self.a_max * factor, self.w_max * factor,
                       self.alpha_max * factor,
-                      None if self.pivot_rate_max is None else self.pivot_rate_max * pf)
+                      None if self.pivot_rate_max is None else self.pivot_rate_max * pf,
+                      None if self.wheel_rate_max is None else self.wheel_rate_max * factor)
 
 
 def _check_floor(floor: Sequence[float]) -> Floor:

@@ -1,5 +1,6 @@
 """Plot of a planned run: the path of the four variants on the floor [m], and the speed [m/s],
-acceleration [m/s²], rotation rate and predicted pivot rates (eq. 8a) [rad/s] over time."""
+acceleration [m/s²], rotation rate and, for units with a turning joint, the predicted turning
+rates (the swivel's pivot rates, eq. 8a) [rad/s] over time."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import numpy as np
 from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Limits, _check_floor
-from ropod_sysid.trajectory.pivots import _variant_pivots
+from ropod_sysid.trajectory.prediction import _variant_prediction, trailing_points
 from ropod_sysid.trajectory.run_variants import variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -19,7 +20,8 @@ from ropod_sysid.trajectory.setpoints import Trajectory
 def plot(traj: Trajectory, path: str | Path, floor: Sequence[float] = DEFAULT_FLOOR,
          limits: Limits | None = None, platform: Platform | None = None) -> None:
     """Plot the planned path of the four variants on the floor, and the speeds, rotation rate
-    and predicted pivot rates over time; PNG or SVG by the file suffix (written atomically)."""
+    and predicted pivot rates (units with a turning joint) over time; PNG or SVG by the file
+    suffix (written atomically)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -50,9 +52,10 @@ def plot(traj: Trajectory, path: str | Path, floor: Sequence[float] = DEFAULT_FL
     ax1.plot(traj.t, traj.speed(), label="|v| [m/s]")
     ax1.plot(traj.t, traj.acceleration(), label="|a| [m/s²]", lw=0.8)
     ax1.plot(traj.t, traj.omega, label="ω [rad/s]", lw=0.8)
-    if platform is not None:
-        fine, _, pred = _variant_pivots(traj, platform)
-        ax1.plot(fine.t, np.abs(pred.rate).max(axis=(0, 2)), label="max |δ̇| [rad/s]", lw=0.8)
+    if platform is not None and trailing_points(platform) is not None:
+        fine, _, pred = _variant_prediction(traj, platform)
+        ax1.plot(fine.t, np.abs(pred.turning[..., pred.turning_units]).max(axis=(0, 2)),
+                 label="max |δ̇| [rad/s]", lw=0.8)
         if limits.pivot_rate_max is not None:
             ax1.axhline(limits.pivot_rate_max, color="0.5", ls=":", lw=0.8)
     ax1.axhline(limits.v_max, color="0.5", ls="--", lw=0.8)

@@ -1,20 +1,23 @@
 """The pre-run check of a planned run (thesis Sec. VI-A): :func:`check`.
 
-Limits and where they are broken, the floor, the pivot rates predicted with eq. 8a per unit and
-wheel flips (all four variants), and the identifiability the run promises: the condition number
-and rank of the stacked regressor A_ID,ext of the four variants and the predicted standard
-deviation of every parameter (:mod:`ropod_sysid.trajectory.identifiability`).
+Limits and where they are broken, the floor, the unit angles predicted along all four variants
+by every unit type (:func:`ropod_sysid.trajectory.prediction.predict_angles`): turning rates and
+flags of the types that have them (the swivel: pivot rates of eq. 8a and wheel flips) and the
+rate of every driven wheel, and the identifiability the run promises: the condition number and
+rank of the stacked regressor A_ID,ext of the four variants and the predicted standard deviation
+of every parameter (:mod:`ropod_sysid.trajectory.identifiability`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.params import Parameters
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.identifiability import (
     Conditioning,
@@ -24,7 +27,7 @@ from ropod_sysid.trajectory.identifiability import (
     predicted_std,
 )
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Floor, Limits, _check_floor
-from ropod_sysid.trajectory.pivots import _variant_pivots
+from ropod_sysid.trajectory.prediction import Prediction, _variant_prediction
 from ropod_sysid.trajectory.run_variants import VARIANTS, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -67,14 +70,18 @@ class CheckReport:
     ----------
     duration, samples : of the run
     limits, floor : what it was checked against
-    peaks : name → maximum over the four variants of |v|, |a|, |ω|, |ω̇| and the pivot rate
+    peaks : name → maximum over the four variants of |v|, |a|, |ω|, |ω̇|, the turning rate
+        (``pivot_rate``: nan without units that turn) and the wheel rate
     findings : limits broken (with time range and variant), floor left, wheel flips
-    pivot_peak : (4, n) maximum |δ̇| per variant and unit [rad/s]; pivot_peak_time (4, n) [s]
+    pivot_peak : (4, n) maximum turning rate |δ̇| per variant and unit [rad/s] (nan for units
+        without a turning joint); pivot_peak_time (4, n) [s]
     extent : (4, 4) x_min, x_max, y_min, y_max of the planned path of each variant [m]
     names : parameter names (per-wheel or shared friction)
     conditioning : of the stacked regressor of the four variants
     true_values, std, relative_std : (p,) parameters, predicted standard deviations and
         std / |true value| for noise σ_b = ``noise`` at ``log_rate``
+    wheel_peak : (4, A) maximum |φ̇| per variant and actuated joint [rad/s]; actuators : the
+        actuators' current channels (``cur_1L`` …), naming them
     """
 
     duration: float
@@ -96,6 +103,13 @@ class CheckReport:
     std: np.ndarray
     relative_std: np.ndarray
     friction: str = "per-wheel"
+    wheel_peak: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
+    actuators: list[str] = field(default_factory=list)
+
+    @property
+    def turning(self) -> list[int]:
+        """Indices of the units with a turning joint."""
+        return [j for j in range(len(self.units)) if np.isfinite(self.pivot_peak[:, j]).all()]
 
     @property
     def condition_number(self) -> float:
@@ -119,13 +133,17 @@ class CheckReport:
             "duration": self.duration, "samples": self.samples, "platform": self.platform,
             "limits": {"v_max": self.limits.v_max, "a_max": self.limits.a_max,
                        "w_max": self.limits.w_max, "alpha_max": self.limits.alpha_max,
-                       "pivot_rate_max": self.limits.pivot_rate_max},
+                       "pivot_rate_max": self.limits.pivot_rate_max,
+                       "wheel_rate_max": self.limits.wheel_rate_max},
             "floor": list(self.floor),
             "peaks": {k: num(v) for k, v in self.peaks.items()},
             "ok": self.ok,
             "findings": [f.__dict__ for f in self.findings],
-            "pivot_rate_max": {v: {u: num(self.pivot_peak[i, j])
-                                   for j, u in enumerate(self.units)}
+            "pivot_rate_max": {v: {self.units[j]: num(self.pivot_peak[i, j])
+                                   for j in self.turning}
+                               for i, v in enumerate(VARIANTS)},
+            "wheel_rate_max": {v: {a: num(self.wheel_peak[i, j])
+                                   for j, a in enumerate(self.actuators)}
                                for i, v in enumerate(VARIANTS)},
             "extent": {v: [float(e) for e in self.extent[i]] for i, v in enumerate(VARIANTS)},
             "friction": self.friction,
@@ -146,9 +164,12 @@ class CheckReport:
         rows = [("speed |v|", "m/s", self.peaks["speed"], lim.v_max),
                 ("acceleration |a|", "m/s²", self.peaks["acceleration"], lim.a_max),
                 ("rotation rate |ω|", "rad/s", self.peaks["omega"], lim.w_max),
-                ("rot. acceleration |ω̇|", "rad/s²", self.peaks["alpha"], lim.alpha_max),
-                ("pivot rate |δ̇| (predicted)", "rad/s", self.peaks["pivot_rate"],
-                 lim.pivot_rate_max)]
+                ("rot. acceleration |ω̇|", "rad/s²", self.peaks["alpha"], lim.alpha_max)]
+        if self.turning:
+            rows.append(("pivot rate |δ̇| (predicted)", "rad/s", self.peaks["pivot_rate"],
+                         lim.pivot_rate_max))
+        rows.append(("wheel rate |φ̇| (predicted)", "rad/s", self.peaks["wheel_rate"],
+                     lim.wheel_rate_max))
         out.append("")
         out.append(f"{'limit':<36}{'max':>10}{'limit':>10}  status")
         for name, unit, peak, limit in rows:
@@ -164,13 +185,22 @@ class CheckReport:
         out.append(f"{'floor y [' + f'{y0:g}, {y1:g}' + '] m':<36}{ext[:, 2].min():>10.2f}"
                    f"{ext[:, 3].max():>10.2f}  {'ok' if inside else 'LEFT'}")
         out.append("")
-        out.append("max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):")
-        out.append(f"{'variant':<18}" + "".join(f"{'unit ' + u:>12}" for u in self.units))
-        for i, v in enumerate(VARIANTS):
-            cells = [f"{self.pivot_peak[i, j]:>6.2f} @{self.pivot_peak_time[i, j]:>3.0f}s"
-                     for j in range(len(self.units))]
-            out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
-        out.append("")
+        if self.turning:
+            out.append("max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):")
+            out.append(f"{'variant':<18}" + "".join(f"{'unit ' + self.units[j]:>12}"
+                                                    for j in self.turning))
+            for i, v in enumerate(VARIANTS):
+                cells = [f"{self.pivot_peak[i, j]:>6.2f} @{self.pivot_peak_time[i, j]:>3.0f}s"
+                         for j in self.turning]
+                out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
+            out.append("")
+        if self.actuators:
+            out.append("max predicted wheel rate per motor (current channel) [rad/s]:")
+            out.append(f"{'variant':<18}" + "".join(f"{a:>9}" for a in self.actuators))
+            for i, v in enumerate(VARIANTS):
+                out.append(f"{v:<18}" + "".join(f"{self.wheel_peak[i, j]:>9.2f}"
+                                                for j in range(len(self.actuators))))
+            out.append("")
         if self.findings:
             out.append(f"findings ({len(self.findings)}):")
             for f in self.findings[:40]:
@@ -187,7 +217,8 @@ class CheckReport:
                    f"{c.condition_number:.4g}")
         if c.rank < len(self.names):
             out.append(f"  condition number (all columns): inf — {len(self.names) - c.rank} "
-                       "combination(s) not identifiable (symmetric pivots: thesis Sec. VI-C)")
+                       "combination(s) not identifiable (e.g. symmetric unit positions: "
+                       "thesis Sec. VI-C)")
         else:
             out.append(f"  condition number (all columns): {c.condition_number_full:.4g}")
         out.append("")
@@ -197,7 +228,8 @@ class CheckReport:
         for n, v, sd, r in zip(self.names, self.true_values, self.std, self.relative_std,
                                strict=True):
             sd_s = f"{sd:.3g}" if math.isfinite(sd) else "n/a"
-            r_s = f"{100 * r:.3g} %" if math.isfinite(r) else "combined"
+            r_s = (f"{100 * r:.3g} %" if math.isfinite(r) else
+                   "combined" if not math.isfinite(sd) else "value 0")
             out.append(f"{n:<12}{v:>12.4g}{sd_s:>12}{r_s:>12}")
         return "\n".join(out)
 
@@ -211,12 +243,13 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     Parameters
     ----------
     traj : the run (original variant); the other three variants are derived from it
-    platform : geometry for the pivot rates and the regressor
+    platform : unit types and geometry for the predicted angles and the regressor
     limits : :class:`Limits` (default the thesis's); floor : (x_min, x_max, y_min, y_max) [m]
     noise : σ_b [N, N m] of white noise on b_ID for the predicted standard deviations
-    params : true parameter values (name → value) for the relative standard deviations; default
-        :func:`ropod_sysid.params.thesis_fixed_masses`
-    friction : ``"per-wheel"`` or ``"shared"`` friction coefficients
+    params : true parameter values (name → value) for the relative standard deviations (see
+        :func:`true_parameters`); default :func:`ropod_sysid.params.thesis_fixed_masses` for a
+        smart-wheel platform
+    friction : ``"per-wheel"``, ``"shared"`` or ``"body"`` friction coefficients
     log_rate : sample rate [Hz] of the logs the fit will use
     eval_rate : rate [Hz] at which the regressor is evaluated (the information is scaled to
         ``log_rate``)
@@ -224,21 +257,23 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     Returns
     -------
     CheckReport
-        Limits and where they are broken, floor, predicted pivot rates per unit and wheel flips
-        (all four variants), and the stacked regressor A_ID,ext over the four variants along the
-        planned motion (q, q̇, q̈ in the world frame, pivots integrated with eq. 8a): its
-        condition number and rank (column-scaled), and the predicted standard deviation of
-        every parameter. Violations are findings, not errors.
+        Limits and where they are broken, floor, predicted turning rates per unit and wheel
+        flips (the swivel's, eq. 8a), wheel rates per motor (all four variants), and the stacked
+        regressor A_ID,ext over the four variants along the planned motion (q, q̇, q̈ in the
+        world frame, unit angles as each type predicts them): its condition number and rank
+        (column-scaled), and the predicted standard deviation of every parameter. Violations
+        are findings, not errors.
     """
     from ropod_sysid.model import PlatformModel
-    from ropod_sysid.params import DynamicParameters, parameter_names, thesis_fixed_masses
+    from ropod_sysid.model.units import check_variant
+    from ropod_sysid.params import parameter_names
 
     limits = limits or Limits()
     floor = _check_floor(floor)
-    if friction not in ("per-wheel", "shared"):
-        raise InputError(f"unknown friction model {friction!r}; use per-wheel or shared")
+    check_variant(friction)
     if not (noise > 0 and math.isfinite(noise)):
         raise InputError(f"noise must be a positive number (N, N m), got {noise!r}")
+    truth = true_parameters(platform, params)
     model = PlatformModel(platform)
     var = variants(traj)
     findings: list[Finding] = []
@@ -260,38 +295,21 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         out_y = np.maximum(floor[2] - vt.y, vt.y - floor[3])
         findings += _runs(out_x > 0, vt.t, out_x, "floor left in x [m beyond]", 0.0, name)
         findings += _runs(out_y > 0, vt.t, out_y, "floor left in y [m beyond]", 0.0, name)
-    # pivots (on a fine grid: the pivot ODE is stiff)
-    fine, twists, pred = _variant_pivots(traj, platform)
-    prate = np.abs(pred.rate)
-    pivot_peak = prate.max(axis=1)
-    pivot_peak_time = fine.t[prate.argmax(axis=1)]
-    for i, name in enumerate(VARIANTS):
-        for j, u in enumerate(platform.unit_names):
-            if limits.pivot_rate_max is not None:
-                findings += _runs(prate[i, :, j] > limits.pivot_rate_max, fine.t, prate[i, :, j],
-                                  f"pivot rate of unit {u} [rad/s]", limits.pivot_rate_max, name)
-            findings += _runs(pred.pulling[i, :, j], fine.t,
-                              np.ones(fine.n_samples), f"unit {u} pulling (wheel flip)", 0.0,
-                              name)
+    # unit angles (on a fine grid: the pivot ODE is stiff)
+    fine, twists, pred = _variant_prediction(traj, model)
+    findings += _unit_findings(platform, limits, fine.t, pred)
+    prate = np.abs(pred.turning)
+    pivot_peak = np.where(pred.turning_units, prate.max(axis=1), np.nan)
+    pivot_peak_time = np.where(pred.turning_units, fine.t[prate.argmax(axis=1)], np.nan)
+    wheel = np.abs(pred.actuator_rates)
     peaks = {"speed": float(speed.max()), "acceleration": float(accel.max()),
              "omega": float(omega.max()), "alpha": float(alpha.max()),
-             "pivot_rate": float(prate.max())}
-    # the stacked regressor along the planned motion (pivots as predicted)
-    step = max(int(round(1.0 / (eval_rate * float(np.median(np.diff(fine.t)))))), 1)
-    idx = np.arange(0, fine.n_samples, step)
-    q, qd, qdd = _world_motion(fine.t, twists)
-    n_var = len(VARIANTS)
-    a = _regressor_rows(model, q[:, idx].reshape(-1, 3), qd[:, idx].reshape(-1, 3),
-                        qdd[:, idx].reshape(-1, 3),
-                        pred.delta[:, idx].reshape(n_var * idx.size, -1), friction)
+             "pivot_rate": pred.turning_peak, "wheel_rate": float(wheel.max())}
+    # the stacked regressor along the planned motion (unit angles as predicted)
+    a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
     cond = conditioning(a)
     names = parameter_names(platform, friction)  # type: ignore[arg-type]
-    if params is None:
-        truth = thesis_fixed_masses(platform.unit_names)
-    else:
-        truth = DynamicParameters.from_mapping(params, platform, "parameters")
     true_values = truth.vector(names)
-    dt_eval = step * float(np.median(np.diff(fine.t)))
     std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(np.abs(true_values) > 0, std / np.abs(true_values), math.inf)
@@ -299,4 +317,76 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     return CheckReport(traj.duration, traj.n_samples, platform.name, platform.unit_names,
                        limits, floor, peaks, findings, pivot_peak, pivot_peak_time, extent,
                        names, cond, float(noise), float(log_rate), true_values, std, rel,
-                       friction)
+                       friction, wheel.max(axis=1), list(platform.layout.current_names))
+
+
+def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
+                   pred: Prediction) -> list[Finding]:
+    """Per variant and unit: turning rates above their limit and flagged states (the
+    swivel's pivot rate and wheel flips), and wheel rates above ``wheel_rate_max``."""
+    from ropod_sysid.model.units import UNIT_TYPES
+
+    out: list[Finding] = []
+    lay = platform.layout
+    for i, name in enumerate(VARIANTS):
+        for j, u in enumerate(platform.units):
+            label = UNIT_TYPES[u.type].turning
+            if label is not None and limits.pivot_rate_max is not None:
+                rate = np.abs(pred.turning[i, :, j])
+                out += _runs(rate > limits.pivot_rate_max, t, rate,
+                             f"{label} of unit {u.name} [rad/s]", limits.pivot_rate_max, name)
+            for what, mask in pred.flags.items():
+                out += _runs(mask[i, :, j], t, np.ones(t.size), f"unit {u.name} {what}", 0.0,
+                             name)
+        if limits.wheel_rate_max is not None:
+            for k, col in enumerate(lay.current_names):
+                rate = np.abs(pred.actuator_rates[i, :, k])
+                out += _runs(rate > limits.wheel_rate_max * (1 + 1e-9), t, rate,
+                             f"wheel rate of unit {lay.units[lay.current_unit[k]]}, motor {col} "
+                             "[rad/s]", limits.wheel_rate_max, name)
+    return out
+
+
+def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, model: object,
+                      friction: str, eval_rate: float = 20.0) -> tuple[np.ndarray, float]:
+    """A_ID,ext (4M, 3, p) of the four variants (twists (4, N, 3) on the grid of ``fine``,
+    predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for."""
+    dt = float(np.median(np.diff(fine.t)))
+    step = max(int(round(1.0 / (eval_rate * dt))), 1)
+    idx = np.arange(0, fine.n_samples, step)
+    q, qd, qdd = _world_motion(fine.t, twists)
+    n_var = twists.shape[0]
+    a = _regressor_rows(model, q[:, idx].reshape(-1, 3), qd[:, idx].reshape(-1, 3),
+                        qdd[:, idx].reshape(-1, 3),
+                        pred.angles[:, idx].reshape(n_var * idx.size, -1), friction)
+    return a, step * dt
+
+
+def true_parameters(platform: Platform, params: Mapping[str, float] | None) -> Parameters:
+    """The true values :func:`check` divides the predicted stds by.
+
+    ``params`` given with every inertial parameter: as given (friction not given: zero). Given
+    with the base's ``m_b`` and ``Jzz_b`` only: the other parameters are each unit type's
+    typical values (:func:`ropod_sysid.params.typical_parameters`). Not given: the thesis's
+    fixed masses for a smart-wheel platform; for any other platform a one-line error (its
+    masses are not known).
+    """
+    from ropod_sysid.params import (
+        DynamicParameters,
+        inertial_names,
+        thesis_fixed_masses,
+        typical_parameters,
+    )
+
+    if params is None:
+        if platform.types == ["swivel"]:
+            return thesis_fixed_masses(platform.unit_names)
+        raise InputError(
+            f"{platform.source}: no default true parameter values for a platform with "
+            f"{' and '.join(platform.types)} units (the thesis's fixed masses are the ropod's); "
+            "give the parameters (--params) with at least m_b and Jzz_b")
+    values = dict(params)
+    if (any(n not in values for n in inertial_names(platform))
+            and "m_b" in values and "Jzz_b" in values):
+        values = dict(typical_parameters(platform, values["m_b"], values["Jzz_b"])) | values
+    return DynamicParameters.from_mapping(values, platform, "parameters")

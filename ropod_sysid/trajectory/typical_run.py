@@ -2,8 +2,10 @@
 
 Straights, corners, rotations, constant velocity and acceleration, from rest to rest: a chain of
 loops ("lobes") through the start, sized to the floor [m] and closed exactly, every twist change
-a minimum-jerk blend within the limits (:mod:`ropod_sysid.trajectory.blends`), wheel flips
-planned out and the pivot rates predicted with eq. 8a checked for all four variants.
+a minimum-jerk blend within the limits (:mod:`ropod_sysid.trajectory.blends`). For the units
+with a turning joint (the swivel's pivot) wheel flips are planned out and the turning rates
+predicted by their type (eq. 8a) checked for all four variants; platforms without such units
+(omni wheels) skip these steps. With a wheel-rate limit the driven wheels' rates are checked too.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
-from ropod_sysid.trajectory.pivots import predict_pivots
+from ropod_sysid.trajectory.prediction import predict_angles, trailing_points
 from ropod_sysid.trajectory.run_variants import _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -261,7 +263,8 @@ def _typical_program(duration: float, caps: Limits, floor: Floor, pivots: np.nda
 def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             w_max: float = 1.0, alpha_max: float = 1.0, floor: Sequence[float] = DEFAULT_FLOOR,
             dt: float = 0.005, seed: int = 0, pivot_rate_max: float | None = 1.5,
-            platform: Platform | None = None) -> Trajectory:
+            platform: Platform | None = None,
+            wheel_rate_max: float | None = None) -> Trajectory:
     """A "typical" identification run (thesis Sec. VI-A), from rest to rest.
 
     The run is a chain of loops ("lobes") through the start, each leaving and reaching it along
@@ -283,10 +286,14 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     the limits allow at 90 % of their value (pivot rates: 80 %, quasi-steady). The lobes are
     sized to the floor and closed exactly by solving for the length of two straights.
 
-    Wheel flips (Sec. VI-A) are planned out: no blend reverses the velocity of a pivot, a stop is
-    followed by motion in the same direction, and the direction of every pivot velocity turns no
-    faster than the pivot-rate limit. The pivot rates predicted by integration
-    (:func:`predict_pivots`) are then checked for all four variants, and so is the floor.
+    Wheel flips (Sec. VI-A) of the units that trail their pivot (the swivel type; on a mixed
+    platform those units only, none on an omni platform) are planned out: no blend reverses the
+    velocity of a pivot, a stop is followed by motion in the same direction, and the direction of
+    every pivot velocity turns no faster than the pivot-rate limit. The angles predicted by every
+    unit type (:func:`~ropod_sysid.trajectory.prediction.predict_angles`: pivot rates by
+    integration of eq. 8a, wheel flips, wheel rates) are then checked for all four variants, and
+    so is the floor. A wheel rate above ``wheel_rate_max`` makes the run slower (speeds and
+    rotation rates scaled down) until it holds.
 
     Parameters
     ----------
@@ -301,14 +308,16 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     seed : 0 for the reference run; other seeds vary the speeds (±10 %) and the lobe order,
         repeatably.
     pivot_rate_max : pivot-rate limit [rad/s] (Sec. VII-C: 1.5); None to not plan for it
-    platform : geometry for the pivot rates; default the ropod (:func:`ropod_platform`)
+    platform : unit types and geometry for the predicted angles; default the ropod
+        (:func:`ropod_platform`)
+    wheel_rate_max : limit of every driven wheel's rate [rad/s]; None (default): none
 
     Returns
     -------
     Trajectory
         Setpoints at ``dt`` and the planned pose.
     """
-    limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max)
+    limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, wheel_rate_max)
     floor = _check_floor(floor)
     if not (isinstance(duration, int | float) and 0 < duration <= TYPICAL_MAX_DURATION):
         raise InputError(f"duration must be a number of seconds in (0, "
@@ -317,7 +326,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         raise InputError(f"dt must be in (0, 0.1] s, got {dt!r}")
     if platform is None:
         platform = ropod_platform()
-    pivots = platform.positions if pivot_rate_max is not None else None
+    pivots = trailing_points(platform) if pivot_rate_max is not None else None
     rng = np.random.default_rng(seed)
     jitter = 1.0 if seed == 0 else float(rng.uniform(0.9, 1.1))
     order = list(LOBES)
@@ -328,13 +337,18 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     pivot_margin = PIVOT_DESIGN_MARGIN
     shrink = 0.97
     speed = 1.0
+    slower = 1.0  # speeds and rotation rates scaled down for the wheel-rate limit
     last_error = ""
     for _attempt in range(10):
         caps = limits.scaled(DESIGN_MARGIN, pivot_margin)
-        v = min(0.8 * jitter, 0.85) * v_max * speed
-        v_corner = min(0.4 * v_max * jitter, 0.9 * caps.a_max / (0.9 * caps.w_max)) * speed
+        if slower != 1.0:
+            caps = Limits(caps.v_max * slower, caps.a_max, caps.w_max * slower, caps.alpha_max,
+                          caps.pivot_rate_max)
+        vm = v_max * slower
+        v = min(0.8 * jitter, 0.85) * vm * speed
+        v_corner = min(0.4 * vm * jitter, 0.9 * caps.a_max / (0.9 * caps.w_max)) * speed
         design = _Design(
-            v=v, v_corner=v_corner, v_spin=0.2 * v_max * speed,
+            v=v, v_corner=v_corner, v_spin=0.2 * vm * speed,
             w_corner=min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner),
             w_spin=0.9 * caps.w_max, pause=1.0)
         try:
@@ -356,13 +370,18 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             shrink *= 0.93
             last_error = "the planned run leaves the floor"
             continue
-        if pivot_rate_max is not None:
-            pred = predict_pivots(traj.t, np.stack([vt.twist() for vt in var.values()]),
+        if pivots is not None or wheel_rate_max is not None:
+            pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]),
                                   platform)
-            peak = float(np.abs(pred.rate).max())
-            if peak > pivot_rate_max * 0.95 or pred.pulling.any():
+            peak = pred.turning_peak
+            if pivots is not None and (peak > pivot_rate_max * 0.95 or pred.flagged):
                 pivot_margin *= 0.8
                 last_error = f"predicted pivot rate {peak:.2f} rad/s exceeds the limit"
+                continue
+            wheel = float(np.abs(pred.actuator_rates).max())
+            if wheel_rate_max is not None and wheel > wheel_rate_max * DESIGN_MARGIN:
+                slower *= 0.97 * DESIGN_MARGIN * wheel_rate_max / wheel
+                last_error = f"predicted wheel rate {wheel:.3g} rad/s exceeds the limit"
                 continue
         return traj
     raise PlanningError(f"cannot plan a typical run within the limits: {last_error}; relax "

@@ -20,6 +20,11 @@ A unit type is one module; nothing outside it names its joints. It declares (see
 - its actuator rates for a base twist: the simulator's model-free controller and the trajectory
   check's joint-rate limits (:meth:`UnitType.actuator_rates`), and the rates of all its angles
   that the simulator integrates (:meth:`UnitType.angle_rates`);
+- its angles along a planned motion (:meth:`UnitType.predict_angles`, integrated from the unit's
+  kinematics; :meth:`UnitType.quasi_steady_angles`, cheap, for the excitation search): the
+  trajectory planner and check ask every group and never name a joint. A type with a turning
+  joint (the swivel's pivot: :attr:`UnitType.turning`) reports its rate, for the turning-rate
+  limit, and flags (the swivel's "pulling (wheel flip)");
 - the per-unit quantities the report and ``inspect`` show (:meth:`UnitType.unit_table`,
   :meth:`UnitType.quantities`).
 
@@ -32,7 +37,7 @@ passed by name (a mapping name → value), so that a type owns its names.
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal, Protocol
 
 import numpy as np
@@ -85,6 +90,55 @@ class UnitData(Protocol):
     actuator_rate: np.ndarray  # (N, k·m) rates of the actuated joints
 
 
+@dataclass
+class AnglePrediction:
+    """A group's unit angles along V planned motions of N samples (:meth:`UnitType.predict_angles`).
+
+    angles, rates : (V, N, k·a) the unit angles [rad] and their rates [rad/s], unit-major
+    actuator : (V, N, k·m) rates of the actuated joints [rad/s] (:meth:`UnitType.actuator_rates`
+        at the predicted angles)
+    turning : (V, N, k) rate of each unit's turning joint [rad/s] (the swivel's δ̇), None when
+        the type has none
+    flags : finding → (V, N, k) bool where a unit is in a state to avoid (the swivel:
+        ``"pulling (wheel flip)"``)
+    lag : (V, N, k) quasi-steady only: sin of the lag of a trailing unit behind the direction
+        it trails (meaningful while well below 1), None otherwise
+    """
+
+    angles: np.ndarray
+    rates: np.ndarray
+    actuator: np.ndarray
+    turning: np.ndarray | None = None
+    flags: dict[str, np.ndarray] = field(default_factory=dict)
+    lag: np.ndarray | None = None
+
+
+def series(twists: np.ndarray) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Base-frame twists (…, N, 3) as (V, N, 3) series, and the leading shape (…)."""
+    tw = np.asarray(twists, float)
+    return tw.reshape(-1, *tw.shape[-2:]), tw.shape[:-2]
+
+
+def trailing_start(unit: Any, twists: np.ndarray) -> np.ndarray:
+    """Initial angles (V, k·a) of V twist series (V, N, 3): the type's
+    :meth:`UnitType.initial_angles` at each series' first nonzero twist (at rest if none)."""
+    first = np.zeros((twists.shape[0], 3))
+    for v, tw in enumerate(twists):
+        moving = np.flatnonzero(np.abs(tw).sum(axis=1) > 1e-9)
+        if moving.size:
+            first[v] = tw[moving[0]]
+    return np.stack([unit.initial_angles(f) for f in first])
+
+
+def integrated(t: np.ndarray, rates: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Angles (V, N, c) from their rates (V, N, c) by the trapezoidal rule from ``start``
+    (V, c)."""
+    from scipy.integrate import cumulative_trapezoid
+
+    return start[:, None, :] + cumulative_trapezoid(rates, np.asarray(t, float), axis=1,
+                                                    initial=0.0)
+
+
 class UnitType(Protocol):
     """A wheel-unit type: declarations (class level) and a group of k units (instance)."""
 
@@ -95,6 +149,10 @@ class UnitType(Protocol):
     inertial_names: ClassVar[tuple[str, ...]]  # inertial parameters, shared by the type's units
     parameter_info: ClassVar[Mapping[str, tuple[str, str]]]  # family → (SI unit, description)
     friction_signs: ClassVar[Mapping[str, int]]  # friction family → sign when dissipative
+    # the rate of the unit's turning joint in words ("pivot rate"), None: no turning joint.
+    # Its units trail the velocity of their attachment point: planning keeps that velocity
+    # from reversing and turning faster than the turning-rate limit.
+    turning: ClassVar[str | None]
 
     n_units: int
     names: list[str]

@@ -62,7 +62,15 @@ from typing import Any
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.model.units import Channel, FrictionVariant, check_variant
+from ropod_sysid.model.units import (
+    AnglePrediction,
+    Channel,
+    FrictionVariant,
+    check_variant,
+    integrated,
+    series,
+    trailing_start,
+)
 from ropod_sysid.model.units.entry import check_keys, number, point, resolved, unit_name
 
 
@@ -130,6 +138,7 @@ class OmniUnits:
         "foc": ("N m", "Coulomb omni-wheel friction"),
     }
     friction_signs = {"fov": -1, "foc": -1}  # of dissipative friction (added to the torque)
+    turning = None  # fixed to the base: no turning joint, nothing to plan for
 
     def __init__(self, specs: Sequence[OmniSpec], friction_tanh_gain: float = 10.0) -> None:
         self.specs = tuple(specs)
@@ -251,6 +260,26 @@ class OmniUnits:
                     angles: np.ndarray | None = None) -> np.ndarray:
         """The wheel rates (N, k) the base motion implies (O1)."""
         return self.actuator_rates(q, qd)
+
+    def predict_angles(self, t: np.ndarray, twists: np.ndarray,
+                       initial: np.ndarray | None = None) -> AnglePrediction:
+        """Wheel angles along base-frame twists (…, N, 3): the integral (trapezoidal rule) of
+        the wheel rates O1 asks for (θ-independent, so taken at θ = 0) from ``initial`` (…, k)
+        (default :meth:`initial_angles`: zero). No turning joint, nothing to flag."""
+        tw, lead = series(twists)
+        n_var, n, _ = tw.shape
+        rates = self.actuator_rates(np.zeros((n_var * n, 3)),
+                                    tw.reshape(-1, 3)).reshape(n_var, n, self.n_units)
+        start = trailing_start(self, tw) if initial is None else np.broadcast_to(
+            np.asarray(initial, float).reshape(-1, self.n_units), (n_var, self.n_units))
+        angles = integrated(t, rates, start)
+        rates = rates.reshape(*lead, n, -1)
+        return AnglePrediction(angles.reshape(*lead, n, -1), rates, rates)
+
+    def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray,
+                            twist_rates: np.ndarray) -> AnglePrediction:
+        """The wheels follow the base without lag: :meth:`predict_angles`."""
+        return self.predict_angles(t, twists)
 
     def constraint_rows(self, angles: np.ndarray, rates: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,14 @@ from typing import Any
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.model.units import Channel, FrictionVariant, check_variant, unit_major
+from ropod_sysid.model.units import (
+    AnglePrediction,
+    Channel,
+    FrictionVariant,
+    check_variant,
+    swivel_motion,
+    unit_major,
+)
 from ropod_sysid.model.units.entry import check_keys, number, resolved, unit_name
 
 GEOMETRY = ("wheel_radius", "wheel_distance", "caster_offset", "hub_com_offset")
@@ -223,6 +230,7 @@ class SwivelUnits:
         "fpc": ("N m", "Coulomb pivot friction"),
     }
     friction_signs = {"fwv": -1, "fwc": -1, "fpv": 1, "fpc": 1}  # of dissipative friction
+    turning = "pivot rate"  # δ̇: the unit trails its pivot (eq. 8a)
 
     def __init__(self, pivots: np.ndarray, wheel_radius: float, wheel_distance: float,
                  caster_offset: float, hub_com_offset: float, names: Sequence[str] | None = None,
@@ -345,6 +353,22 @@ class SwivelUnits:
         if np.abs(twist).sum() > 1e-9:
             out[:, 0] = np.arctan2(vy + w * self.pivots[:, 0], vx - w * self.pivots[:, 1])
         return out.reshape(-1)
+
+    # ---------------------------------------------------------------- planned motions
+    def predict_angles(self, t: np.ndarray, twists: np.ndarray,
+                       initial: np.ndarray | None = None) -> AnglePrediction:
+        """Pivot angles along base-frame twists (…, N, 3) integrated with eq. 8a from
+        ``initial`` (…, 3k) (default: trailing the first motion, :meth:`initial_angles`), the
+        wheel angles integrated from the wheel rates of eq. 11 at them; turning rate δ̇ and the
+        flag ``pulling (wheel flip)`` (:func:`~ropod_sysid.model.units.swivel_motion.predict`)."""
+        return swivel_motion.predict(self, t, twists, initial)
+
+    def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray,
+                            twist_rates: np.ndarray) -> AnglePrediction:
+        """Every unit trailing its pivot velocity at the quasi-steady lag of eq. 8a (δ̇ = ψ̇);
+        wheel angles as in :meth:`predict_angles`
+        (:func:`~ropod_sysid.model.units.swivel_motion.predict_quasi_steady`)."""
+        return swivel_motion.predict_quasi_steady(self, t, twists, twist_rates)
 
     # ---------------------------------------------------------------- odometry
     def constraint_rows(self, angles: np.ndarray, rates: np.ndarray

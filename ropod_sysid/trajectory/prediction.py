@@ -1,0 +1,112 @@
+"""Unit angles and rates predicted along planned motions, for any mix of unit types.
+
+Every group of the platform predicts its own angles (:meth:`UnitType.predict_angles`: for the
+swivel the pivot ODE of thesis eq. 8a and its wheel-flip flag; for the omni wheel the integral of
+its wheel rates) and the results are placed in the platform's channel order, with the actuator
+rates at the predicted angles (each type's inverse kinematics) for the joint-rate limits. The
+trajectory code asks every group and names no joint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ropod_sysid.platform import Platform
+from ropod_sysid.trajectory.run_variants import variants
+from ropod_sysid.trajectory.setpoints import Trajectory, _fine
+
+
+@dataclass
+class Prediction:
+    """Angles and rates of the whole platform along V planned motions of N samples.
+
+    angles, rates : (V, N, J) unit angles [rad] and rates [rad/s] in the platform's channel order
+    actuator_rates : (V, N, A) rates of the actuated joints [rad/s], current-channel order
+    turning : (V, N, n) rate of each unit's turning joint [rad/s] (zero for units without one)
+    turning_units : (n,) True for the units whose type has a turning joint
+    flags : finding (``"pulling (wheel flip)"``) → (V, N, n) bool (False for other types)
+    lag : (V, N, n) quasi-steady lag (sin) of trailing units (zero for others), or None
+    """
+
+    angles: np.ndarray
+    rates: np.ndarray
+    actuator_rates: np.ndarray
+    turning: np.ndarray
+    turning_units: np.ndarray
+    flags: dict[str, np.ndarray]
+    lag: np.ndarray | None = None
+
+    @property
+    def turning_peak(self) -> float:
+        """max |turning rate| over every series, sample and turning unit (nan: none)."""
+        if not self.turning_units.any():
+            return float("nan")
+        return float(np.abs(self.turning[..., self.turning_units]).max())
+
+    @property
+    def flagged(self) -> bool:
+        """Any unit flagged anywhere (a wheel flip)."""
+        return any(bool(m.any()) for m in self.flags.values())
+
+
+def trailing_points(platform: Platform) -> np.ndarray | None:
+    """Attachment points (m, 2) [m] of the units that trail their velocity (types with a
+    turning joint: the swivel's pivots), which planning keeps from reversing; None if none."""
+    from ropod_sysid.model.units import UNIT_TYPES
+
+    idx = [i for i, u in enumerate(platform.units) if UNIT_TYPES[u.type].turning is not None]
+    return platform.positions[idx] if idx else None
+
+
+def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
+                   initial: np.ndarray | None = None, twist_rates: np.ndarray | None = None,
+                   ) -> Prediction:
+    """Every group's angles along base-frame twists (…, N, 3) at times t (N,).
+
+    ``model``: a :class:`~ropod_sysid.model.PlatformModel` (or a platform); ``initial`` (…, J)
+    initial angles (default: each type's trailing start); with ``twist_rates`` the quasi-steady
+    closed form (:meth:`UnitType.quasi_steady_angles`) instead of integration.
+    """
+    from ropod_sysid.model import PlatformModel
+
+    if isinstance(model, Platform):
+        model = PlatformModel(model)
+    assert isinstance(model, PlatformModel)
+    tw = np.asarray(twists, float)
+    lead = tw.shape[:-1]
+    layout, n_units = model.layout, model.n_units
+    angles = np.empty((*lead, layout.n_angles))
+    rates = np.empty((*lead, layout.n_angles))
+    act = np.empty((*lead, layout.n_currents))
+    turning = np.zeros((*lead, n_units))
+    turning_units = np.zeros(n_units, bool)
+    flags: dict[str, np.ndarray] = {}
+    lag = None if twist_rates is None else np.zeros((*lead, n_units))
+    for g, unit in model.groups:
+        if twist_rates is not None:
+            p = unit.quasi_steady_angles(t, tw, twist_rates)  # type: ignore[attr-defined]
+        else:
+            start = None if initial is None else np.asarray(initial, float)[..., g.angles]
+            p = unit.predict_angles(t, tw, start)  # type: ignore[attr-defined]
+        angles[..., g.angles] = p.angles
+        rates[..., g.angles] = p.rates
+        act[..., g.currents] = p.actuator
+        if p.turning is not None:
+            turning[..., g.units] = p.turning
+            turning_units[g.units] = True
+        for what, mask in p.flags.items():
+            flags.setdefault(what, np.zeros((*lead, n_units), bool))[..., g.units] = mask
+        if lag is not None and p.lag is not None:
+            lag[..., g.units] = p.lag
+    return Prediction(angles, rates, act, turning, turning_units, flags, lag)
+
+
+def _variant_prediction(traj: Trajectory, model: object,
+                        ) -> tuple[Trajectory, np.ndarray, Prediction]:
+    """The run on the fine grid (the pivot ODE is stiff: :func:`_fine`), the twists (4, N, 3)
+    of its four variants there and their predicted angles."""
+    fine = _fine(traj)
+    twists = np.stack([vt.twist() for vt in variants(fine).values()])
+    return fine, twists, predict_angles(fine.t, twists, model)

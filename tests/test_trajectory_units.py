@@ -1,0 +1,263 @@
+"""`trajectory typical|optimize|check` for every unit type: the 5DPO's omni wheels, a platform
+mixing smart wheels and omni wheels, and the unit types' angle predictions behind them."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from ropod_sysid.cli.main import main
+from ropod_sysid.errors import InputError
+from ropod_sysid.io.paramfile import read_truth_parameters
+from ropod_sysid.model import PlatformModel
+from ropod_sysid.params import parameter_names, typical_parameters
+from ropod_sysid.platform import load_platform, save_platform
+from ropod_sysid.trajectory import (
+    VARIANTS,
+    Limits,
+    Trajectory,
+    check,
+    optimize,
+    predict_angles,
+    predict_pivots,
+    read_trajectory_csv,
+    typical,
+    variants,
+)
+from tests.test_units_pipeline import mixed_platform
+
+ROOT = Path(__file__).resolve().parents[1]
+OMNI = ROOT / "datasets" / "omni" / "platform.yaml"
+TRUTH = ROOT / "datasets" / "omni" / "truth.json"
+
+
+def sub_platform(platform, kind: str):
+    """The platform's units of one type only (same settings)."""
+    return replace(platform, units=tuple(u for u in platform.units if u.type == kind))
+
+
+@pytest.fixture(scope="module")
+def omni():
+    return load_platform(OMNI)
+
+
+@pytest.fixture(scope="module")
+def omni_truth(omni):
+    return read_truth_parameters(TRUTH, omni)
+
+
+@pytest.fixture(scope="module")
+def mixed():
+    return mixed_platform()
+
+
+def within(traj: Trajectory, limits: Limits) -> None:
+    assert traj.speed().max() <= limits.v_max
+    assert traj.acceleration().max() <= limits.a_max
+    assert np.abs(traj.omega).max() <= limits.w_max
+    assert np.abs(traj.twist_rates()[:, 2]).max() <= limits.alpha_max
+
+
+# --------------------------------------------------------------------------- predicted angles
+
+
+def test_omni_wheel_angles_integrate_the_actuator_rates(omni):
+    """Along an arc at a constant twist, each wheel turns at (h·v + c ω)/r (O1) and its angle
+    grows linearly; along a typical run the wheel angles are the trapezoidal integral of the
+    model's actuator rates evaluated in the world frame (the heading turns)."""
+    t = np.linspace(0.0, 4.0, 401)
+    twist = np.tile([0.3, -0.1, 0.5], (t.size, 1))
+    pred = predict_angles(t, twist[None], omni)
+    heads = np.array([u.heading for u in omni.units])
+    pos = omni.positions
+    rate = (np.cos(heads) * 0.3 - np.sin(heads) * 0.1
+            + (pos[:, 0] * np.sin(heads) - pos[:, 1] * np.cos(heads)) * 0.5) / 0.0325
+    np.testing.assert_allclose(pred.rates[0], np.broadcast_to(rate, (t.size, 4)), atol=1e-12)
+    np.testing.assert_allclose(pred.angles[0], np.outer(t, rate), atol=1e-12)
+    np.testing.assert_array_equal(pred.actuator_rates, pred.rates)
+    assert not pred.turning_units.any() and pred.flags == {}
+    traj = typical(duration=12.0, platform=omni)
+    q, qd, _ = traj.kinematics()
+    world = PlatformModel(omni).actuator_rates(q, qd, np.zeros((t.size, 4)))
+    pred = predict_angles(traj.t, traj.twist(), omni, initial=np.arange(4.0))
+    np.testing.assert_allclose(pred.rates, world, atol=1e-9)
+    steps = 0.5 * (world[1:] + world[:-1]) * np.diff(traj.t)[:, None]
+    integral = np.arange(4.0) + np.vstack([np.zeros(4), np.cumsum(steps, axis=0)])
+    np.testing.assert_allclose(pred.angles, integral, atol=1e-9)
+
+
+def test_mixed_prediction_is_each_type_in_its_channels(mixed):
+    """Every group predicts its own channels: the swivel units' pivot angles are those of the
+    platform of the swivel units alone (eq. 8a), the omni wheels' those of the omni units alone;
+    and every predicted rate is the model's angle rate at the predicted angles."""
+    traj = typical(duration=12.0, platform=mixed)
+    twists = np.stack([v.twist() for v in variants(traj).values()])
+    pred = predict_angles(traj.t, twists, mixed)
+    lay = mixed.layout
+    np.testing.assert_array_equal(pred.turning_units, [False, True, True, False])
+    piv = predict_pivots(traj.t, twists, sub_platform(mixed, "swivel"))
+    delta = [lay.angle_names.index(f"delta_{u}") for u in "23"]
+    np.testing.assert_array_equal(pred.angles[..., delta], piv.delta)
+    np.testing.assert_array_equal(pred.turning[..., 1:3], piv.rate)
+    assert not piv.pulling.any() and np.abs(piv.rate).max() < 1.5
+    assert not pred.flags["pulling (wheel flip)"].any()
+    omni_only = predict_angles(traj.t, twists, sub_platform(mixed, "omni"))
+    phi = [lay.angle_names.index(f"phi_{u}") for u in "14"]
+    np.testing.assert_allclose(pred.angles[..., phi], omni_only.angles, atol=1e-12)
+    q, qd, _ = traj.kinematics()
+    model = PlatformModel(mixed)
+    np.testing.assert_allclose(pred.rates[0], model.angle_rates(q, qd, pred.angles[0]),
+                               atol=1e-9)
+    np.testing.assert_allclose(pred.actuator_rates[0],
+                               model.actuator_rates(q, qd, pred.angles[0]), atol=1e-9)
+
+
+# --------------------------------------------------------------------------- typical
+
+
+def test_typical_on_omni_plans_no_pivots(omni):
+    """No turning joint: the run is the one planned without a pivot-rate limit."""
+    traj = typical(duration=20.0, platform=omni)
+    np.testing.assert_array_equal(traj.twist(), typical(duration=20.0,
+                                                        pivot_rate_max=None).twist())
+    for vt in variants(traj).values():
+        within(vt, Limits())
+
+
+def test_typical_keeps_the_wheel_rate_limit(omni, mixed):
+    for pf in (omni, mixed):
+        free = typical(duration=20.0, platform=pf)
+        limit = 0.7 * float(np.abs(predict_angles(free.t, free.twist(), pf).actuator_rates).max())
+        traj = typical(duration=20.0, platform=pf, wheel_rate_max=limit)
+        pred = predict_angles(traj.t, np.stack([v.twist() for v in variants(traj).values()]),
+                              pf)
+        assert 0.5 * limit < np.abs(pred.actuator_rates).max() <= limit
+        assert not pred.flagged
+        assert np.isnan(pred.turning_peak) if pf is omni else pred.turning_peak < 1.5
+        assert traj.duration == pytest.approx(20.0)
+
+
+# --------------------------------------------------------------------------- check
+
+
+def test_check_on_omni_wheel_rates_and_identifiability(omni, omni_truth):
+    t = np.linspace(0.0, 6.0, 1201)
+    ramp = np.clip(t, 0, 1) * np.clip(6 - t, 0, 1)
+    straight = Trajectory.from_twist(t, 0.5 * ramp, 0 * t, 0 * t)
+    rep = check(straight, omni, Limits(wheel_rate_max=10.0), params=omni_truth)
+    # along x only wheels 1 and 3 (headings ±π, 0) roll: |φ̇| = v / r
+    np.testing.assert_allclose(rep.wheel_peak[:, [1, 3]], 0.5 / 0.0325, rtol=1e-12)
+    np.testing.assert_allclose(rep.wheel_peak[:, [0, 2]], 0.0, atol=1e-12)
+    assert rep.actuators == ["cur_0", "cur_1", "cur_2", "cur_3"]
+    whats = {f.what for f in rep.findings}
+    assert whats == {"wheel rate of unit 1, motor cur_1 [rad/s]",
+                     "wheel rate of unit 3, motor cur_3 [rad/s]"}
+    assert np.isnan(rep.pivot_peak).all() and np.isnan(rep.peaks["pivot_rate"])
+    text = rep.text()
+    assert "pivot rate" not in text and "EXCEEDED" in text
+    assert "wheel rate |φ̇| (predicted) [rad/s]" in text
+    # a typical run identifies every parameter of the 5DPO (per-wheel friction)
+    rep = check(typical(duration=12.0, platform=omni), omni, params=omni_truth)
+    assert rep.ok and rep.names == parameter_names(omni)
+    assert rep.rank == len(rep.names) == 11 and np.all(np.isfinite(rep.std))
+    data = rep.to_dict()
+    assert data["pivot_rate_max"] == {v: {} for v in VARIANTS}
+    assert set(data["wheel_rate_max"]["original"]) == {"cur_0", "cur_1", "cur_2", "cur_3"}
+    body = check(typical(duration=12.0, platform=omni), omni, params=omni_truth,
+                 friction="body")
+    assert body.names[-6:] == ["fbv_x", "fbv_y", "fbv_w", "fbc_x", "fbc_y", "fbc_w"]
+
+
+def test_check_true_values_of_other_platforms(omni, mixed):
+    traj = typical(duration=12.0, platform=mixed)
+    with pytest.raises(InputError, match=r"mixed\.yaml: no default true parameter values for "
+                       r"a platform with omni and swivel units .*--params\) with at least m_b "
+                       "and Jzz_b") as exc:
+        check(traj, mixed)
+    assert "\n" not in str(exc.value)
+    rep = check(traj, mixed, params={"m_b": 30.0, "Jzz_b": 3.0})
+    np.testing.assert_array_equal(rep.true_values,
+                                  typical_parameters(mixed, 30.0, 3.0).vector(rep.names))
+    assert rep.ok and rep.rank == len(rep.names) == 22
+    assert rep.turning == [1, 2]
+    data = rep.to_dict()
+    assert set(data["pivot_rate_max"]["original"]) == {"2", "3"}
+    assert len(data["wheel_rate_max"]["original"]) == 6
+    assert "unit 2      unit 3" in rep.text()
+
+
+# --------------------------------------------------------------------------- optimize
+
+
+@pytest.mark.parametrize("kind", ["omni", "mixed"])
+def test_optimize_other_platforms(kind, omni, mixed, omni_truth):
+    pf = omni if kind == "omni" else mixed
+    params = omni_truth if kind == "omni" else {"m_b": 30.0, "Jzz_b": 3.0}
+    limits = Limits(wheel_rate_max=12.0)
+    opt = optimize(pf, duration=10.0, harmonics=3, maxiter=8, seed=0, limits=limits)
+    rep = check(opt.trajectory, pf, limits, params=params)
+    assert rep.ok, [f.text() for f in rep.findings]
+    assert rep.peaks["wheel_rate"] <= 12.0
+    assert rep.condition_number == pytest.approx(opt.condition_number)
+    assert opt.rank == opt.structural_rank == len(rep.names)
+    for vt in variants(opt.trajectory).values():
+        within(vt, limits)
+    typ = check(typical(duration=10.0, platform=pf, wheel_rate_max=12.0), pf, params=params)
+    assert opt.condition_number * 2 < typ.condition_number
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def one_line(res) -> str:
+    assert res.exit_code == 2, res.output
+    lines = [x for x in res.output.splitlines() if x.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in res.output
+    return lines[0]
+
+
+def test_cli_typical_then_check_on_omni(tmp_path):
+    runner = CliRunner()
+    out = tmp_path / "run"
+    res = runner.invoke(main, ["trajectory", "typical", "--platform", str(OMNI), "--duration",
+                               "12", "--wheel-rate-max", "15", "--out", str(out), "--quiet"])
+    assert res.exit_code == 0, res.output
+    runs = {v: read_trajectory_csv(out / f"{v}.csv") for v in VARIANTS}
+    np.testing.assert_array_equal(runs["negated"].vx, -runs["original"].vx)
+    args = ["trajectory", "check", str(out / "original.csv"), "--platform", str(OMNI),
+            "--wheel-rate-max", "15"]
+    res = runner.invoke(main, [*args, "--params", str(TRUTH), "--json"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["ok"] and data["rank"] == data["parameters"] == 11
+    assert data["limits"]["wheel_rate_max"] == 15.0
+    assert max(data["wheel_rate_max"]["original"].values()) <= 15.0
+    res = runner.invoke(main, [*args, "--params", str(TRUTH), "--plot", str(tmp_path / "p.png")])
+    assert res.exit_code == 0 and "Jrot_o" in res.output and "fov_0" in res.output
+    assert (tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
+    assert "--params" in one_line(runner.invoke(main, args))
+    assert "--wheel-rate-max" in one_line(runner.invoke(main, [*args, "--wheel-rate-max",
+                                                               "0"]))
+
+
+def test_cli_optimize_and_check_a_mixed_platform(tmp_path, mixed):
+    path = tmp_path / "mixed.yaml"
+    save_platform(mixed, path)
+    params = tmp_path / "base.json"
+    params.write_text('{"m_b": 30.0, "Jzz_b": 3.0}')
+    out = tmp_path / "opt"
+    runner = CliRunner()
+    res = runner.invoke(main, ["trajectory", "optimize", "--platform", str(path), "--duration",
+                               "8", "--harmonics", "2", "--maxiter", "2", "--out", str(out),
+                               "--quiet"])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(main, ["trajectory", "check", str(out / "mirrored.csv"), "--platform",
+                               str(path), "--params", str(params)])
+    assert res.exit_code == 0, res.output
+    assert "rank 22" in res.output and "\nfpc_3 " in res.output and "\nfoc_4 " in res.output
+    assert "max predicted pivot rate per unit" in res.output
