@@ -160,6 +160,13 @@ class Solution:
         return out
 
 
+def numerical_rank(sv: np.ndarray, rcond: float = RCOND) -> int:
+    """The rank rule of the fit and of ``trajectory check``: the singular values ``sv``
+    (descending) of a column-scaled regressor above ``rcond`` · σ_max."""
+    sv = np.asarray(sv, float)
+    return int(np.sum(sv > rcond * sv[0])) if sv.size and sv[0] > 0 else 0
+
+
 def check_rcond(rcond: float) -> None:
     """``rcond`` is a finite number in (0, 1): 0 counts noise as identifiable, 1 nothing."""
     if not (np.isfinite(rcond) and 0 < rcond < 1):
@@ -211,7 +218,7 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     cs = c / scale
     sv = np.linalg.svd(cs, compute_uv=False)
     tol = rcond * sv[0]
-    rank = int(np.sum(sv > tol))
+    rank = numerical_rank(sv, rcond)
     q_free = len(free)
     values = np.zeros(p)
     values[fix_idx] = m_fix

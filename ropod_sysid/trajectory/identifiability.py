@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ropod_sysid.solve import RCOND, numerical_rank
 from ropod_sysid.trajectory.setpoints import integrate_pose
 
 
@@ -65,7 +66,7 @@ class Conditioning:
     condition_number_full: float
 
 
-RANK_TOL = 1e-9
+RANK_TOL = RCOND  # the fit's rank rule (:func:`ropod_sysid.solve.numerical_rank`)
 
 
 def conditioning(a: np.ndarray) -> Conditioning:
@@ -75,7 +76,7 @@ def conditioning(a: np.ndarray) -> Conditioning:
     sv = np.linalg.svd(a / np.where(norms > 0, norms, 1.0), compute_uv=False)
     if sv.size == 0 or sv[0] == 0:
         return Conditioning(sv, 0, math.inf, math.inf)
-    rank = int(np.sum(sv > RANK_TOL * sv[0]))
+    rank = numerical_rank(sv, RANK_TOL)
     full = float(sv[0] / sv[-1]) if rank == sv.size else math.inf
     return Conditioning(sv, rank, float(sv[0] / sv[rank - 1]), full)
 
@@ -102,7 +103,7 @@ def predicted_std(a: np.ndarray, noise: float | tuple[float, float] = 1.0,
     _, sv, vt = np.linalg.svd(aw / scale, full_matrices=False)
     if sv.size == 0 or sv[0] == 0:
         return np.full(a.shape[-1], math.inf)
-    r = int(np.sum(sv > tol * sv[0]))
+    r = numerical_rank(sv, tol)
     vr = vt[:r].T  # (p, r)
     cov_diag = ((vr / sv[:r]) ** 2).sum(axis=1) / scale**2
     # a unit vector e_j is identifiable when it lies in the row space span(vr)
