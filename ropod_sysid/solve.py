@@ -217,7 +217,6 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     scale = np.where(norms > 0, norms, 1.0)
     cs = c / scale
     sv = np.linalg.svd(cs, compute_uv=False)
-    tol = rcond * sv[0]
     rank = numerical_rank(sv, rcond)
     q_free = len(free)
     values = np.zeros(p)
