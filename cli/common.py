@@ -92,8 +92,9 @@ class InputFile(click.Path):
     socket would block the reader or never end. A missing file is left to the reader, whose
     message says what kind of file it expected."""
 
-    def __init__(self) -> None:
-        super().__init__(dir_okay=False)
+    def __init__(self, recordings: bool = False) -> None:
+        super().__init__(dir_okay=recordings)
+        self.recordings = recordings  # a log: a rosbag2 recording is a directory
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> Any:
@@ -102,6 +103,13 @@ class InputFile(click.Path):
             mode = os.stat(path).st_mode
         except OSError:
             return path
+        if stat.S_ISDIR(mode) and self.recordings:
+            from ropod_sysid.io.rosbag import is_bag
+
+            if is_bag(path):
+                return path
+            raise OptionError(f"{path}: is a directory without a rosbag2 metadata.yaml; give a "
+                              "log file (.csv, .csv.gz, .mcap, .bag) or a rosbag2 recording")
         if not stat.S_ISREG(mode):
             name = param.opts[0] if param is not None and param.opts and isinstance(
                 param, click.Option) else (param.human_readable_name if param else "")
@@ -111,6 +119,7 @@ class InputFile(click.Path):
 
 
 INPUT = InputFile()
+LOG_INPUT = InputFile(recordings=True)  # a log file, or a rosbag2 recording (a directory)
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 platform_option = click.option(
     "--platform", "platform_path", required=True, type=INPUT,

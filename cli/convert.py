@@ -6,7 +6,13 @@ import warnings
 
 import click
 
-from ropod_sysid.cli.common import INPUT, platform_option, quiet_option, reports_errors, writes
+from ropod_sysid.cli.common import (
+    LOG_INPUT,
+    platform_option,
+    quiet_option,
+    reports_errors,
+    writes,
+)
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import log_format, read_log
 from ropod_sysid.io.csvlog import write_csv_log
@@ -16,7 +22,7 @@ from ropod_sysid.platform import load_platform
 
 
 @click.command("convert", short_help="Convert a log between CSV, MCAP (JSON) and MCAP (ROS 2).")
-@click.argument("in_path", metavar="IN", type=INPUT)
+@click.argument("in_path", metavar="IN", type=LOG_INPUT)
 @click.argument("out_path", metavar="OUT", type=click.Path(dir_okay=False))
 @platform_option
 @click.option("--encoding", type=click.Choice(["json", "ros2"]), default=None,
@@ -32,10 +38,14 @@ from ropod_sysid.platform import load_platform
 def command(in_path: str, out_path: str, platform_path: str, encoding: str | None, layout: str,
             quiet: bool) -> None:
     """Convert log IN to OUT (.csv, .csv.gz or .mcap); the input layout is recognised by itself.
+    IN may also be a ROS 1 .bag or a rosbag2 recording (a directory).
 
     OUT is written atomically; reading notes (dropped frames, damage) are printed.
     """
     suffix = log_format(out_path)  # .csv for .csv and .csv.gz
+    if suffix == ".bag":
+        raise InputError(f"{out_path}: ropod-sysid reads ROS bags but does not write them; give "
+                         "a .mcap name (ROS 2 tools replay it) or .csv")
     if layout == "smartwheel" and out_path.lower().endswith(".gz"):
         raise InputError(f"{out_path}: the smart-wheel layout is written as .csv or .mcap, "
                          "not compressed; give a .csv or .mcap name")

@@ -8,6 +8,7 @@ import click
 
 from ropod_sysid.cli.common import (
     INPUT,
+    LOG_INPUT,
     SpanType,
     platform_option,
     quiet_option,
@@ -127,7 +128,7 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 
 
 @click.command("fit", short_help="Fit the parameters to logs; write the parameter file.")
-@click.argument("logs", nargs=-1, required=True, type=INPUT)
+@click.argument("logs", nargs=-1, required=True, type=LOG_INPUT)
 @platform_option
 @click.option("--out", "out_path", required=True, type=click.Path(dir_okay=False),
               help="Parameter file to write.")

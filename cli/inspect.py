@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import click
 
-from ropod_sysid.cli.common import INPUT, json_text, platform_option, reports_errors
+from ropod_sysid.cli.common import LOG_INPUT, json_text, platform_option, reports_errors
 from ropod_sysid.inspect import format_inspection, inspect_file
 from ropod_sysid.platform import load_platform
 
 
 @click.command("inspect", short_help="Look at a log before fitting: rate, gaps, ranges, verdict.")
-@click.argument("log_path", metavar="LOG", type=INPUT)
+@click.argument("log_path", metavar="LOG", type=LOG_INPUT)
 @platform_option
 @click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON.")
 @reports_errors

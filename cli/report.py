@@ -6,6 +6,7 @@ import click
 
 from ropod_sysid.cli.common import (
     INPUT,
+    LOG_INPUT,
     SpanType,
     platform_option,
     quiet_option,
@@ -20,7 +21,7 @@ from ropod_sysid.regressor import Span
 
 
 @click.command("report", short_help="Write the HTML report of a parameter file on logs (no refit).")
-@click.argument("logs", nargs=-1, required=True, type=INPUT)
+@click.argument("logs", nargs=-1, required=True, type=LOG_INPUT)
 @platform_option
 @click.option("--params", "params_path", required=True, type=INPUT,
               help="Parameter file of a fit (json, yaml or ros2).")

@@ -6,6 +6,7 @@ import click
 
 from ropod_sysid.cli.common import (
     INPUT,
+    LOG_INPUT,
     SpanType,
     json_text,
     platform_option,
@@ -24,7 +25,7 @@ from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
 
 
 @click.command("validate", short_help="Check a fitted model on logs it was not fitted on.")
-@click.argument("logs", nargs=-1, required=True, type=INPUT)
+@click.argument("logs", nargs=-1, required=True, type=LOG_INPUT)
 @platform_option
 @click.option("--params", "params_path", required=True, type=INPUT,
               help="Parameter file of a fit.")

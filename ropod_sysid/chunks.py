@@ -54,8 +54,14 @@ def _iter_path(path: Path, platform: Platform, chunk: int, gaps: Gaps) -> Iterat
 
         yield from iter_mcap_log(path, platform, chunk, gaps)
         return
+    from ropod_sysid.io.rosbag import is_bag, iter_bag_log
+
+    if is_bag(path):
+        yield from iter_bag_log(path, platform, chunk, gaps)
+        return
     suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
-    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a ROS "
+                     "1 .bag or a rosbag2 directory")
 
 
 def _is_smartwheel(module: object, path: Path) -> bool:

@@ -549,9 +549,12 @@ def check_source(source: Source, platform: Platform) -> None:
         return
     path = Path(source)
     name = path.name.lower()
-    if not name.endswith((".csv", ".csv.gz", ".mcap")):
+    from ropod_sysid.io.rosbag import is_bag
+
+    if not name.endswith((".csv", ".csv.gz", ".mcap")) and not is_bag(path):
         suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
-        raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+        raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a "
+                         "ROS 1 .bag or a rosbag2 directory")
     if name.endswith(".csv"):
         try:
             from ropod_sysid.io import smartwheel

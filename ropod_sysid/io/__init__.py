@@ -5,26 +5,33 @@ from __future__ import annotations
 import hashlib
 import os
 import stat
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.io.log import Log
+from ropod_sysid.io.log import Log, join_logs
 from ropod_sysid.io.timebase import Gaps
 from ropod_sysid.platform import Platform
 
-LOG_SUFFIXES = (".csv", ".csv.gz", ".mcap")
+LOG_SUFFIXES = (".csv", ".csv.gz", ".mcap")  # the formats written; also read: .bag, rosbag2
 
 
 def log_format(path: str | Path) -> str:
-    """The log format a file name asks for: ``.csv`` (also ``.csv.gz``) or ``.mcap``."""
+    """The log format a file name asks for: ``.csv`` (also ``.csv.gz``), ``.mcap``, or
+    ``.bag`` (a ROS 1 bag, or a rosbag2 directory: :mod:`ropod_sysid.io.rosbag`)."""
     name = Path(path).name.lower()
     if name.endswith(".csv.gz"):
         return ".csv"
     suffix = Path(name).suffix
     if suffix in (".csv", ".mcap"):
         return suffix
-    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz or .mcap")
+    from ropod_sysid.io.rosbag import is_bag
+
+    if is_bag(path):
+        return ".bag"
+    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a ROS "
+                     "1 .bag or a rosbag2 directory")
 
 
 def read_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
@@ -44,6 +51,10 @@ def read_log(path: str | Path, platform: Platform, gaps: Gaps = "error") -> Log:
         from ropod_sysid.io.csvlog import read_csv_log
 
         return read_csv_log(path, platform, gaps)
+    if log_format(path) == ".bag":
+        from ropod_sysid.io.rosbag import iter_bag_log
+
+        return join_logs(list(iter_bag_log(path, platform, sys.maxsize, gaps)))
     from ropod_sysid.io.mcaplog import read_mcap_log
 
     return read_mcap_log(path, platform, gaps)
@@ -102,6 +113,9 @@ def _digest(path: str) -> bytes:
 def write_log(log: Log, path: str | Path, platform: Platform | None = None) -> None:
     """Write a log; the suffix picks the format (.csv, .csv.gz, .mcap)."""
     path = Path(path)
+    if path.name.lower().endswith(".bag"):
+        raise InputError(f"{path}: ropod-sysid reads ROS bags but does not write them; write "
+                         ".mcap (ROS 2 tools replay it) or .csv")
     if log_format(path) == ".csv":
         from ropod_sysid.io.csvlog import write_csv_log
 

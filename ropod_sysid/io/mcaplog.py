@@ -515,7 +515,8 @@ def layout_of(channel: Channel, schema: Schema | None) -> tuple[str, str] | None
 
     name = schema.name if schema is not None else ""
     enc = channel.message_encoding
-    encoding = "json" if enc == "json" else "ros2" if enc == "cdr" else None
+    # (ROS 1 messages are converted to CDR as they are read: iter_mcap_log)
+    encoding = "json" if enc == "json" else "ros2" if enc in ("cdr", "ros1") else None
     if encoding is None:
         return None
     if name in (CONTRACT_JSON_SCHEMA, CONTRACT_ROS2_SCHEMA, "ropod_sysid_msgs/LogSample"):
@@ -584,6 +585,9 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000,
     where = str(path)
     scan = scan_mcap(path, keep_messages=False)
     stream = pick_stream(scan, where)
+    batches = None
+    if stream.channel.message_encoding == "ros1":
+        stream, batches = _ros1_stream(path, stream, where)
     if stream.layout == "contract":
         pieces: Any = ContractPieces(stream, platform, where)
     else:
@@ -591,7 +595,44 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000,
 
         pieces = SmartWheelPieces(stream, platform, where, chunk)
     tb = TimeBase(where, pieces.locate, gaps)
-    return _warned(checked_chunks(_chunks(path, chunk, scan, stream, pieces), tb))
+    return _warned(checked_chunks(_chunks(path, chunk, scan, stream, pieces, batches), tb))
+
+
+def _ros1_stream(path: str | Path, stream: Stream, where: str
+                 ) -> tuple[Stream, Iterator[list[bytes]]]:
+    """A ROS 1 channel of an MCAP file (``ros1`` profile) as a CDR one: its ``ros1msg``
+    schema read as ``ros2msg`` (the text formats agree for the messages read here) and its
+    payloads converted as they are read (:func:`ropod_sysid.io.rosbag.ros1_to_cdr`)."""
+    from ropod_sysid.io.rosbag import ros1_to_cdr
+
+    schema = stream.schema
+    if schema is None:
+        raise InputError(f"{where}: channel {stream.channel.topic} is ROS 1 encoded but has no "
+                         "schema; it cannot be decoded")
+    convert = ros1_to_cdr(schema.name, schema.data.decode(), where)
+    as_cdr = Stream(stream.layout, "ros2", stream.channel,
+                    Schema(id=schema.id, name=schema.name, encoding="ros2msg",
+                           data=schema.data), stream.messages)
+    cid = stream.channel.id
+
+    def batches() -> Iterator[list[bytes]]:
+        records = _records(path, McapScan(), light=True)
+        raw: list[bytes] = []
+        try:
+            for record in records:
+                if isinstance(record, MessageRun):
+                    raw.extend(record.of(cid))
+                elif isinstance(record, Message) and record.channel_id == cid:
+                    raw.append(record.data)
+                if len(raw) >= BATCH:
+                    yield [convert(r) for r in raw]
+                    raw = []
+        finally:
+            records.close()
+        if raw:
+            yield [convert(r) for r in raw]
+
+    return as_cdr, batches()
 
 
 def _warned(logs: Iterator[Log]) -> Iterator[Log]:
@@ -602,9 +643,11 @@ def _warned(logs: Iterator[Log]) -> Iterator[Log]:
         yield log
 
 
-def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces: Any
-            ) -> Iterator[Log]:
-    """The chunks of :func:`iter_mcap_log`, before the time checks."""
+def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces: Any,
+            batches: Iterator[list[bytes]] | None = None) -> Iterator[Log]:
+    """The chunks of :func:`iter_mcap_log`, before the time checks; ``batches``: the
+    channel's payloads from another recording format (:mod:`ropod_sysid.io.rosbag`) instead
+    of the MCAP file's records."""
     where = str(path)
     cid = stream.channel.id
     damage = scan.damage
@@ -636,21 +679,31 @@ def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces
             yield from pieces.logs(rows.take(0, chunk), done, False)
             done += chunk
 
-    records = _records(path, McapScan(), light=True)
+    records = _records(path, McapScan(), light=True) if batches is None else None
     try:
-        for record in records:
-            if isinstance(record, MessageRun):
-                raw.extend(record.of(cid))
-            elif isinstance(record, Message) and record.channel_id == cid:
-                raw.append(record.data)
-            if len(raw) >= BATCH:
+        if batches is not None:
+            for batch in batches:
+                raw.extend(batch)
                 if not decode():
                     break
                 yield from ready()
+            else:
+                decode()
         else:
-            decode()
+            for record in records:
+                if isinstance(record, MessageRun):
+                    raw.extend(record.of(cid))
+                elif isinstance(record, Message) and record.channel_id == cid:
+                    raw.append(record.data)
+                if len(raw) >= BATCH:
+                    if not decode():
+                        break
+                    yield from ready()
+            else:
+                decode()
     finally:
-        records.close()
+        if records is not None:
+            records.close()
     yield from ready()
     _check_recovered(decoded, damage, stream, where)
     rows = Rows.join(pending) if pending else None
