@@ -56,6 +56,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
+from simulate_bench import simulate_figures
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -533,9 +534,9 @@ def main() -> None:
                     help="length of the main log [min]; memory is also shown at 1/3 and 2x")
     ap.add_argument("--quick", action="store_true", help="small sizes, to debug the script")
     ap.add_argument("--fresh", action="store_true", help="simulate again even if cached")
-    ap.add_argument("--only", choices=("all", "report", "mcap"), default="all",
-                    help="report: only the report's figures; mcap: only the MCAP figures "
-                    "(a few minutes each)")
+    ap.add_argument("--only", choices=("all", "report", "mcap", "simulate"), default="all",
+                    help="report: only the report's figures; mcap: only the MCAP figures; "
+                    "simulate: only the simulator's (a few minutes each)")
     ap.add_argument("--mcap-minutes", type=float, default=3.0,
                     help="length of the MCAP log [min]; memory is also shown at 2x")
     args = ap.parse_args()
@@ -547,6 +548,12 @@ def main() -> None:
     started = time.perf_counter()
     say(f"machine: {os.cpu_count()} cores, Python {_platform.python_version()}, "
         f"load average {load()}")
+    if args.only == "simulate":
+        OUT.mkdir(parents=True, exist_ok=True)
+        sim, sim_rows = simulate_figures(ropod_sysid(), OUT, args.quick)
+        write_table(sim_rows, f"Machine: {os.cpu_count()} cores, load average {load()} after "
+                    "(shared).", sim, "simulate", started)
+        return
 
     platform_path, truth_path, base, cached = make_base(base_s, args.fresh)
     say(f"base run: {base.name} ({'cached' if cached else 'simulated now'})")
@@ -695,6 +702,8 @@ def main() -> None:
     rows += report_rows
     results["mcap"] = mcap_bench(base, base_s, platform_path, mcap_minutes, key)
     rows += mcap_rows(results["mcap"])
+    results["simulate"], sim_rows = simulate_figures(ropod_sysid(), OUT, args.quick)
+    rows += sim_rows
     results["load_after"] = load()
     note = (f"Logs: a {base_s:g} s simulated 1 kHz run repeated with t, φ continued across the "
             f"seams (δ by whole turns; no pose columns); simulating the long runs directly at "

@@ -93,6 +93,9 @@ MAX_DT = 1e-3  # the longest integration step of the simulate command [s]
 MIN_ENCODER_COUNTS = 16  # fewer counts per revolution leave no motion in the angles
 MAX_SEED = 2**32 - 1
 ENGINES = ("auto", "numba", "numpy")  # of :func:`simulate`
+# "auto" integrates runs shorter than this many steps with numpy: loading numba and the compiled
+# loop costs about 1 s once per process, what numpy takes for about 1000 steps
+MIN_COMPILED_STEPS = 1000
 
 
 def check_run(rate: float, dt: float, controller: Controller, sensors: Sensors) -> None:
@@ -175,8 +178,9 @@ def simulate(platform: Platform, params: DynamicParameters,
         (:func:`ropod_sysid.params.friction_of`).
     engine : ``"numba"`` integrates with the compiled loop (:mod:`ropod_sysid.simulate_jit`),
         ``"numpy"`` with the vectorised model (the reference), ``"auto"`` with the compiled
-        loop when numba is installed and every unit type of the platform has a kernel. Both
-        give the same results to round-off.
+        loop when numba is installed, every unit type of the platform has a kernel and the
+        runs are at least :data:`MIN_COMPILED_STEPS` steps long. Both give the same results
+        to round-off.
 
     Returns one :class:`SimResult` per setpoint series, sampled at ``rate``.
     """
@@ -189,12 +193,14 @@ def simulate(platform: Platform, params: DynamicParameters,
     params.check_physical()
     friction = friction_of(params)
     model = PlatformModel(platform)
-    groups = compiled_groups(model, params, friction, engine)
     n_ang, n_act = platform.layout.n_angles, platform.layout.n_currents
     n_runs = len(runs)
     durations = np.array([r.duration for r in runs])
     t0 = np.array([r.t[0] for r in runs])
     steps = int(np.ceil(durations.max() / dt))
+    if engine == "auto" and steps < MIN_COMPILED_STEPS:
+        engine = "numpy"
+    groups = compiled_groups(model, params, friction, engine)
     stride = int(round(1.0 / (rate * dt)))  # whole (check_run)
 
     if isinstance(initial, str):

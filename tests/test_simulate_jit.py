@@ -15,7 +15,14 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.model.units.omni import OmniUnits
 from ropod_sysid.params import Parameters, thesis_fixed_masses, typical_parameters
 from ropod_sysid.platform import load_platform
-from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, Setpoints, simulate
+from ropod_sysid.simulate import (
+    MIN_COMPILED_STEPS,
+    Controller,
+    ForceSchedule,
+    Sensors,
+    Setpoints,
+    simulate,
+)
 
 from .conftest import four_variants, smooth_setpoints
 from .test_omni import PLATFORM as OMNI_PLATFORM
@@ -101,8 +108,8 @@ def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
     for the compiled loop names the platform's types."""
     pf = mixed_platform()
     truth = Parameters(dict(typical_parameters(pf, 30.0, 3.0)) | {"Jrot_o": 0.004})
-    runs = four_variants(0.3)[:1]
-    compiled = simulate(pf, truth, runs, engine="numba")
+    runs = four_variants(1.0)[:1]  # 1000 steps: long enough for the compiled loop
+    compiled = simulate(pf, truth, runs)
     monkeypatch.delattr(OmniUnits, "compiled")
     assert_same_runs(simulate(pf, truth, runs), compiled)
     with pytest.raises(InputError, match=r"^engine 'numba': a unit type of mixed.yaml "
@@ -113,7 +120,7 @@ def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
 
 def test_numpy_fallback_without_numba(monkeypatch, off_square) -> None:
     truth = thesis_fixed_masses(off_square.unit_names)
-    runs = four_variants(0.3)[:1]
+    runs = four_variants(1.0)[:1]
     compiled = simulate(off_square, truth, runs)
     monkeypatch.setitem(sys.modules, "numba", None)  # import numba raises ImportError
     monkeypatch.delitem(sys.modules, "ropod_sysid.simulate_jit")
@@ -128,3 +135,16 @@ def test_unknown_engine(off_square) -> None:
     with pytest.raises(InputError, match="^engine 'jax': use auto, numba, numpy$"):
         simulate(off_square, thesis_fixed_masses(off_square.unit_names),
                  four_variants(0.3)[:1], engine="jax")
+
+
+def test_auto_engine_by_run_length(off_square) -> None:
+    """``auto`` simulates runs of fewer than MIN_COMPILED_STEPS steps with numpy (numba's
+    start-up would cost more) and longer ones compiled: bitwise the results of that engine."""
+    truth = thesis_fixed_masses(off_square.unit_names)
+    short, long = four_variants(0.3)[:1], four_variants(1.0)[:1]
+    assert round(0.3 / 1e-3) < MIN_COMPILED_STEPS <= round(1.0 / 1e-3)
+    for runs, engine in ((short, "numpy"), (long, "numba")):
+        (auto,), (chosen,) = simulate(off_square, truth, runs), simulate(off_square, truth, runs,
+                                                                          engine=engine)
+        for f in FIELDS:
+            np.testing.assert_array_equal(getattr(auto, f), getattr(chosen, f))
