@@ -710,8 +710,8 @@ def main() -> None:
     rows += sim_rows
     results["load_after"] = load()
     note = (f"Logs: a {base_s:g} s simulated 1 kHz run repeated with t, φ continued across the "
-            f"seams (δ by whole turns; no pose columns). Machine: {os.cpu_count()} cores, load average "
-            f"{results['load_before']} before, {results['load_after']} after (shared).")
+            f"seams (δ by whole turns; no pose columns). Machine: {os.cpu_count()} cores, load "
+            f"average {results['load_before']} before, {results['load_after']} after (shared).")
     write_table(rows, note, results, "results", started)
 
 

@@ -37,7 +37,7 @@ KERNELS: tuple[Any, ...] = (swivel_jit, omni_jit)  # a kernel's id is its index 
 CHUNK = 2000  # steps per compiled call (between progress-bar updates)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _unit_dynamics(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray,
                    ic: np.ndarray, q: np.ndarray, qd: np.ndarray, ang: np.ndarray,
                    m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: np.ndarray,
@@ -48,7 +48,7 @@ def _unit_dynamics(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray,
         omni_jit.dynamics(geo, par, ia, ic, q, qd, ang, m, b, btau, tauf, ff, arate, crate)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _unit_actuator_rates(kind: int, geo: np.ndarray, ia: np.ndarray, ic: np.ndarray,
                          q: np.ndarray, qd: np.ndarray, ang: np.ndarray,
                          crate: np.ndarray) -> None:
@@ -58,7 +58,7 @@ def _unit_actuator_rates(kind: int, geo: np.ndarray, ia: np.ndarray, ic: np.ndar
         omni_jit.actuator_rates(geo, ia, ic, q, qd, ang, crate)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _unit_energy(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q: np.ndarray,
                  qd: np.ndarray, ang: np.ndarray) -> float:
     if kind == 0:
@@ -66,7 +66,7 @@ def _unit_energy(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q:
     return omni_jit.kinetic_energy(geo, par, ia, q, qd, ang)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _eom(groups: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, b: np.ndarray,
          btau: np.ndarray, tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray,
          crate: np.ndarray) -> None:
@@ -100,7 +100,7 @@ def _eom(groups: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, b: np.ndar
         ff[2] += f2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _solve3(a: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out = a⁻¹ y for a 3 × 3 matrix (Gaussian elimination with partial pivoting, as LAPACK's
     gesv); ``a`` and ``y`` are overwritten."""
@@ -125,7 +125,7 @@ def _solve3(a: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
         out[r] = acc / a[r, r]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: np.ndarray,
            ff: np.ndarray, tau: np.ndarray, fb: np.ndarray, has_fb: bool, rhs: np.ndarray,
            qdd: np.ndarray) -> None:
@@ -144,7 +144,7 @@ def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: 
     _solve3(m, rhs, qdd)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     """Kinetic energy of base and units [J] (App. C)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
@@ -156,7 +156,7 @@ def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int, end: int,
         last: np.ndarray, sp_all: np.ndarray, f_all: np.ndarray, has_fb: bool, x_all: np.ndarray,
         integ_all: np.ndarray, rec_q: np.ndarray, rec_qd: np.ndarray, rec_qdd: np.ndarray,

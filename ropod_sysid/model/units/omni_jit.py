@@ -35,7 +35,7 @@ def arrays(units: OmniUnits, params: Mapping[str, float], variant: str
     return geo, np.concatenate([[float(params["Jrot_o"])], fov, foc])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def dynamics(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarray,
              qd: np.ndarray, ang: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray,
              tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray, crate: np.ndarray) -> None:
@@ -63,7 +63,7 @@ def dynamics(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, ic: np.ndarray, q
         crate[ic[i]] = phid
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def actuator_rates(geo: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, ang: np.ndarray, crate: np.ndarray) -> None:
     """φ̇_i = J_i q̇_b (O1) the base motion asks of the wheels, into ``crate`` (A,)."""
@@ -73,7 +73,7 @@ def actuator_rates(geo: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarra
         crate[ic[i]] = (ch * qd[0] + sh * qd[1] + c_i * qd[2]) / r_i
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def kinetic_energy(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, ang: np.ndarray) -> float:
     """Σ_i ½ J_rot,o φ̇_i² [J] with φ̇_i from O1."""
