@@ -73,9 +73,11 @@ def test_ropod_runs_of_two_lengths_with_force_and_sensors(off_square) -> None:
     assert_same_runs(fast, ref)
 
 
-def test_ropod_torque_limit_and_zero_angles(off_square) -> None:
-    """The anti-windup branch (a saturated controller) and all-zero initial angles."""
-    truth = thesis_fixed_masses(off_square.unit_names)
+def test_ropod_torque_limit_zero_angles_and_body_friction(off_square) -> None:
+    """The anti-windup branch (a saturated controller), all-zero initial angles and body-axis
+    friction in place of the units' (a swivel kernel without friction)."""
+    truth = Parameters(dict(thesis_fixed_masses(off_square.unit_names).without_friction())
+                       | {n: 10 * v for n, v in PAPER_BODY.items()})
     t = np.array([0.0, 0.05, 0.06, 0.8])
     step = Setpoints(t, np.array([0, 0, 0.8, 0.8]), 0 * t, np.array([0, 0, 1.0, 1.0]))
     fast, ref = both(off_square, truth, [step, four_variants(0.8)[1]], rate=1000.0,
