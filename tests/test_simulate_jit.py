@@ -5,6 +5,7 @@ fallback when numba or a kernel is missing."""
 
 from __future__ import annotations
 
+import json
 import sys
 
 import numpy as np
@@ -156,3 +157,36 @@ def test_auto_engine_by_run_length(off_square) -> None:
     for runs, engine in ((short, "numpy"), (long, "numba")):
         assert_identical(simulate(off_square, truth, runs),
                          simulate(off_square, truth, runs, engine=engine))
+
+
+def test_cli_engines_write_the_same_log(tmp_path, off_square) -> None:
+    """``simulate --engine numba`` and ``--engine numpy`` write the same log to round-off (a
+    0.6 s run: ``auto`` would take numpy); a bad ``--engine`` is one line."""
+    from ropod_sysid.io import read_log
+    from ropod_sysid.platform import save_platform
+
+    from .test_cli import one_line_error, run
+
+    save_platform(off_square, tmp_path / "p.yaml")
+    (tmp_path / "truth.json").write_text(json.dumps(
+        thesis_fixed_masses(off_square.unit_names).to_mapping()))
+    t = np.arange(0, 0.605, 0.01)
+    v = 0.5 * np.sin(np.pi * t / 0.6) ** 2
+    np.savetxt(tmp_path / "traj.csv", np.column_stack([t, v, 0.3 * v, 0.5 * v]),
+               delimiter=",", header="t,vx,vy,omega", comments="")
+    args = ["simulate", "--platform", str(tmp_path / "p.yaml"), "--params",
+            str(tmp_path / "truth.json"), "--trajectory", str(tmp_path / "traj.csv"),
+            "--rate", "1000", "--quiet"]
+    logs = []
+    for engine in ("numba", "numpy"):
+        out = tmp_path / f"{engine}.csv"
+        r = run(*args, "--out", str(out), "--engine", engine)
+        assert r.exit_code == 0, r.output
+        logs.append(read_log(out, off_square))
+    assert np.abs(logs[0].angles[-1] - logs[0].angles[0]).max() > 0.5  # the wheels turned
+    np.testing.assert_array_equal(logs[0].t, logs[1].t)
+    np.testing.assert_allclose(logs[0].angles, logs[1].angles, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(logs[0].currents, logs[1].currents, rtol=0, atol=1e-7)
+    r = run(*args, "--out", str(tmp_path / "x.csv"), "--engine", "jax")
+    one_line_error(r, "--engine")
+    assert not (tmp_path / "x.csv").exists()
