@@ -94,8 +94,8 @@ MIN_ENCODER_COUNTS = 16  # fewer counts per revolution leave no motion in the an
 MAX_SEED = 2**32 - 1
 ENGINES = ("auto", "numba", "numpy")  # of :func:`simulate`
 # "auto" integrates runs shorter than this many steps with numpy: loading numba and the compiled
-# loop costs about 1 s once per process, what numpy takes for about 1000 steps
-MIN_COMPILED_STEPS = 1000
+# loop costs about 0.8 s once per process, what numpy takes for about 500 steps of the ropod
+MIN_COMPILED_STEPS = 500
 
 
 def check_run(rate: float, dt: float, controller: Controller, sensors: Sensors) -> None:

@@ -280,6 +280,7 @@ def integrate(groups: tuple[np.ndarray, ...], bp: np.ndarray, ctrl: np.ndarray, 
     has_fb = f_all is not None
     forces = np.ascontiguousarray(f_all) if f_all is not None else np.zeros((1, n_runs, 3))
     sp = np.ascontiguousarray(sp_all)
+    bar.set(0.0, force=True)  # drawn while a first call compiles or loads the cache
     for first in range(0, steps + 1, CHUNK):
         end = min(first + CHUNK - 1, steps)
         run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ, *records)
