@@ -1,13 +1,14 @@
 #!/usr/bin/env python
 """Benchmark of long logs and fleets (issue 7): streaming fit, memory, O(N) LOESS, Dask.
 
-    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only report|mcap]
+    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only report|mcap|simulate]
         [--mcap-minutes 3]
 
 1. Simulates a 60 s rest-to-rest ropod run at 1 kHz with ``ropod-sysid simulate`` (2¹⁴-count
-   encoders, 30 mA current noise). Simulating 30 minutes at 1 kHz directly takes over an hour
-   here (RK4 at 1 kHz, about 2.5 ms per step), so the long logs are built by repeating that
-   run with t and φ continued across the seams (δ shifted by whole turns; the simulated log
+   encoders, 30 mA current noise). The long logs are built by repeating that run (simulating
+   30 minutes directly took over an hour with the numpy path; the compiled one takes seconds,
+   but the repeated run keeps the logs comparable across versions) with t and φ continued
+   across the seams (δ shifted by whole turns; the simulated log
    has no pose columns). The setpoints start and end with pure forward driving, so the pivots
    trail the same way at both ends and a seam is a stop and a start, not a jump. The run is
    cached in ``benchmarks/out/`` and reused while its inputs are unchanged (``--fresh``
@@ -30,7 +31,10 @@
    README's first command) and on the M/3-minute log, as the ratio
    ``fit --report`` / (1.5 × ``fit`` + 1 s) (goal ≤ 1); the peak memory of ``fit --report``
    on the M/3- and M-minute logs (goal: flat).
-4. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
+4. The simulator (issue 13), also alone with ``--only simulate``: the compiled loop against
+   the numpy path, compile and cache-load times, the CLI on a short run
+   (``benchmarks/simulate_bench.py``).
+5. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
    (``--only report``: ``report.{md,json}``; ``--only mcap``: only the MCAP part, to
    ``results_mcap.{md,json}``).
 
@@ -56,6 +60,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
+from simulate_bench import simulate_figures
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out"
@@ -533,9 +538,9 @@ def main() -> None:
                     help="length of the main log [min]; memory is also shown at 1/3 and 2x")
     ap.add_argument("--quick", action="store_true", help="small sizes, to debug the script")
     ap.add_argument("--fresh", action="store_true", help="simulate again even if cached")
-    ap.add_argument("--only", choices=("all", "report", "mcap"), default="all",
-                    help="report: only the report's figures; mcap: only the MCAP figures "
-                    "(a few minutes each)")
+    ap.add_argument("--only", choices=("all", "report", "mcap", "simulate"), default="all",
+                    help="report: only the report's figures; mcap: only the MCAP figures; "
+                    "simulate: only the simulator's (a few minutes each)")
     ap.add_argument("--mcap-minutes", type=float, default=3.0,
                     help="length of the MCAP log [min]; memory is also shown at 2x")
     args = ap.parse_args()
@@ -547,6 +552,12 @@ def main() -> None:
     started = time.perf_counter()
     say(f"machine: {os.cpu_count()} cores, Python {_platform.python_version()}, "
         f"load average {load()}")
+    if args.only == "simulate":
+        OUT.mkdir(parents=True, exist_ok=True)
+        sim, sim_rows = simulate_figures(ropod_sysid(), OUT, args.quick)
+        write_table(sim_rows, f"Machine: {os.cpu_count()} cores, load average {load()} after "
+                    "(shared).", sim, "simulate", started)
+        return
 
     platform_path, truth_path, base, cached = make_base(base_s, args.fresh)
     say(f"base run: {base.name} ({'cached' if cached else 'simulated now'})")
@@ -695,11 +706,12 @@ def main() -> None:
     rows += report_rows
     results["mcap"] = mcap_bench(base, base_s, platform_path, mcap_minutes, key)
     rows += mcap_rows(results["mcap"])
+    results["simulate"], sim_rows = simulate_figures(ropod_sysid(), OUT, args.quick)
+    rows += sim_rows
     results["load_after"] = load()
     note = (f"Logs: a {base_s:g} s simulated 1 kHz run repeated with t, φ continued across the "
-            f"seams (δ by whole turns; no pose columns); simulating the long runs directly at "
-            f"1 kHz would take hours. Machine: {os.cpu_count()} cores, load average "
-            f"{results['load_before']} before, {results['load_after']} after (shared).")
+            f"seams (δ by whole turns; no pose columns). Machine: {os.cpu_count()} cores, load "
+            f"average {results['load_before']} before, {results['load_after']} after (shared).")
     write_table(rows, note, results, "results", started)
 
 

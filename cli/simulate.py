@@ -21,7 +21,9 @@ from ropod_sysid.io.paramfile import read_truth_parameters
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
 from ropod_sysid.simulate import (
+    ENGINES,
     MAX_DT,
+    MIN_COMPILED_STEPS,
     Controller,
     ForceSchedule,
     Sensors,
@@ -66,6 +68,10 @@ from ropod_sysid.trajectory import read_trajectory_csv
                    "first motion; zero: all along the base x axis.")
 @click.option("--initial-pivots", "initial_angles", type=click.Choice(["auto", "zero"]),
               hidden=True, help="Old name of --initial-angles.")
+@click.option("--engine", type=click.Choice(ENGINES), default="auto", show_default=True,
+              help="auto: the compiled loop (numba) when every unit type has a kernel and the "
+                   f"run has at least {MIN_COMPILED_STEPS} steps, else numpy; numba: the "
+                   "compiled loop; numpy: the vectorised reference (slower).")
 @quiet_option
 @reports_errors
 @writes(outputs={"out_path": "--out"},
@@ -74,7 +80,7 @@ from ropod_sysid.trajectory import read_trajectory_csv
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
             dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
             seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
-            initial_angles: str, quiet: bool) -> None:
+            initial_angles: str, engine: str, quiet: bool) -> None:
     """Simulate a run of the platform under a velocity controller and write its log."""
     if not out_path.lower().endswith(LOG_SUFFIXES):
         raise InputError(f"--out {out_path}: use a .csv or .mcap file name")
@@ -96,7 +102,7 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt, controller=controller,
                          sensors=sensors, force=force,
                          initial="auto" if initial_angles == "auto" else None, quiet=quiet,
-                         source=out_path)
+                         source=out_path, engine=engine)
     if not np.all(np.isfinite(result.q)):
         raise InputError(f"{traj_path}: the simulation diverged; lower the setpoints or raise "
                          "--torque-limit")

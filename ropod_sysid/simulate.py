@@ -92,6 +92,10 @@ class Sensors:
 MAX_DT = 1e-3  # the longest integration step of the simulate command [s]
 MIN_ENCODER_COUNTS = 16  # fewer counts per revolution leave no motion in the angles
 MAX_SEED = 2**32 - 1
+ENGINES = ("auto", "numba", "numpy")  # of :func:`simulate`
+# "auto" integrates runs shorter than this many steps with numpy: loading numba and the compiled
+# loop costs about 0.8 s once per process, what numpy takes for about 500 steps of the ropod
+MIN_COMPILED_STEPS = 500
 
 
 def check_run(rate: float, dt: float, controller: Controller, sensors: Sensors) -> None:
@@ -162,7 +166,7 @@ def simulate(platform: Platform, params: DynamicParameters,
              dt: float = 1e-3, controller: Controller | None = None,
              sensors: Sensors | None = None, force: ForceSchedule | None = None,
              initial: np.ndarray | str | None = "auto", quiet: bool = True,
-             source: str = "<simulation>") -> list[SimResult]:
+             source: str = "<simulation>", engine: str = "auto") -> list[SimResult]:
     """Simulate one run per setpoint series, all integrated together.
 
     Parameters
@@ -172,6 +176,11 @@ def simulate(platform: Platform, params: DynamicParameters,
         (:func:`initial_angles`), or None for all zero (swivel units aligned with the base x
         axis). The friction variant follows from the parameter names
         (:func:`ropod_sysid.params.friction_of`).
+    engine : ``"numba"`` integrates with the compiled loop (:mod:`ropod_sysid.simulate_jit`),
+        ``"numpy"`` with the vectorised model (the reference), ``"auto"`` with the compiled
+        loop when numba is installed, every unit type of the platform has a kernel and the
+        runs are at least :data:`MIN_COMPILED_STEPS` steps long. Both give the same results
+        to round-off.
 
     Returns one :class:`SimResult` per setpoint series, sampled at ``rate``.
     """
@@ -179,6 +188,8 @@ def simulate(platform: Platform, params: DynamicParameters,
     controller = controller or Controller()
     sensors = sensors or Sensors()
     check_run(rate, dt, controller, sensors)
+    if engine not in ENGINES:
+        raise InputError(f"engine {engine!r}: use {', '.join(ENGINES)}")
     params.check_physical()
     friction = friction_of(params)
     model = PlatformModel(platform)
@@ -187,6 +198,9 @@ def simulate(platform: Platform, params: DynamicParameters,
     durations = np.array([r.duration for r in runs])
     t0 = np.array([r.t[0] for r in runs])
     steps = int(np.ceil(durations.max() / dt))
+    if engine == "auto" and steps < MIN_COMPILED_STEPS:
+        engine = "numpy"
+    groups = compiled_groups(model, params, friction, engine)
     stride = int(round(1.0 / (rate * dt)))  # whole (check_run)
 
     if isinstance(initial, str):
@@ -222,49 +236,59 @@ def simulate(platform: Platform, params: DynamicParameters,
     f_all = None if force is None else np.stack([force.at(grid[:, k]) for k in range(n_runs)],
                                                 axis=1)
 
+    n_keep = np.floor(durations * rate + 1e-9).astype(np.int64) + 1  # log samples per run
+    records = (rec_q, rec_qd, rec_qdd, rec_ang, rec_tau, rec_fb, rec_e)
     with Progress(steps, "simulate", quiet=quiet) as bar:
-        for step in range(steps + 1):
-            # controller (zero-order hold over the step): IK for the current unit angles
-            sp = sp_all[step]
-            c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
-            qd_set = np.stack([c * sp[:, 0] - s * sp[:, 1], s * sp[:, 0] + c * sp[:, 1],
-                               sp[:, 2]], axis=-1)
-            st = model.state(q, qd, angles)
-            want = model.actuator_rates(q, qd_set, angles)
-            err = want - st.actuator_rate
-            tau_raw = controller.kp * err + controller.ki * (integ + err * dt)
-            tau = np.clip(tau_raw, -controller.torque_limit, controller.torque_limit)
-            saturated = tau != tau_raw
-            integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
-            f_b = None if f_all is None else f_all[step]
-            k1 = deriv(q, qd, angles, tau, f_b, st)
-            if step % stride == 0:
-                k = step // stride
-                rec_q[k], rec_qd[k], rec_qdd[k] = q, qd, k1[1]
-                rec_ang[k], rec_tau[k] = angles, tau
-                if f_b is not None:
-                    rec_fb[k] = f_b
-                rec_e[k] = model.kinetic_energy(st, params)
-            if step == steps:
-                break
-            # RK4 with τ held over the step
-            y = (q, qd, angles)
-            y2 = tuple(a + 0.5 * dt * b for a, b in zip(y, k1, strict=True))
-            k2 = deriv(*y2, tau, f_b)
-            y3 = tuple(a + 0.5 * dt * b for a, b in zip(y, k2, strict=True))
-            k3 = deriv(*y3, tau, f_b)
-            y4 = tuple(a + dt * b for a, b in zip(y, k3, strict=True))
-            k4 = deriv(*y4, tau, f_b)
-            q, qd, angles = (a + dt / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
-                             for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True))
-            bar.update(1)
+        if groups is not None:
+            from ropod_sysid import simulate_jit
+
+            simulate_jit.integrate(
+                groups, simulate_jit.base_parameters(model, params, friction),
+                np.array([controller.kp, controller.ki, controller.torque_limit, dt]), stride,
+                steps, np.minimum((n_keep - 1) * stride, steps), sp_all, f_all, ang0, n_act,
+                records, bar)
+        else:
+            for step in range(steps + 1):
+                # controller (zero-order hold over the step): IK for the current unit angles
+                sp = sp_all[step]
+                c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+                qd_set = np.stack([c * sp[:, 0] - s * sp[:, 1], s * sp[:, 0] + c * sp[:, 1],
+                                   sp[:, 2]], axis=-1)
+                st = model.state(q, qd, angles)
+                want = model.actuator_rates(q, qd_set, angles)
+                err = want - st.actuator_rate
+                tau_raw = controller.kp * err + controller.ki * (integ + err * dt)
+                tau = np.clip(tau_raw, -controller.torque_limit, controller.torque_limit)
+                saturated = tau != tau_raw
+                integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
+                f_b = None if f_all is None else f_all[step]
+                k1 = deriv(q, qd, angles, tau, f_b, st)
+                if step % stride == 0:
+                    k = step // stride
+                    rec_q[k], rec_qd[k], rec_qdd[k] = q, qd, k1[1]
+                    rec_ang[k], rec_tau[k] = angles, tau
+                    if f_b is not None:
+                        rec_fb[k] = f_b
+                    rec_e[k] = model.kinetic_energy(st, params)
+                if step == steps:
+                    break
+                # RK4 with τ held over the step
+                y = (q, qd, angles)
+                y2 = tuple(a + 0.5 * dt * b for a, b in zip(y, k1, strict=True))
+                k2 = deriv(*y2, tau, f_b)
+                y3 = tuple(a + 0.5 * dt * b for a, b in zip(y, k2, strict=True))
+                k3 = deriv(*y3, tau, f_b)
+                y4 = tuple(a + dt * b for a, b in zip(y, k3, strict=True))
+                k4 = deriv(*y4, tau, f_b)
+                q, qd, angles = (a + dt / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
+                                 for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True))
+                bar.update(1)
 
     rng = np.random.default_rng(sensors.seed)
     results = []
     for r in range(n_runs):
-        n_keep = int(np.floor(durations[r] * rate + 1e-9)) + 1
-        t_true = t0[r] + np.arange(n_keep) / rate
-        sl = (slice(0, n_keep), r)
+        t_true = t0[r] + np.arange(n_keep[r]) / rate
+        sl = (slice(0, n_keep[r]), r)
         res = SimResult(
             log=None,  # type: ignore[arg-type]
             q=rec_q[sl].copy(), qd=rec_qd[sl].copy(), qdd=rec_qdd[sl].copy(),
@@ -274,6 +298,27 @@ def simulate(platform: Platform, params: DynamicParameters,
         res.log = record(platform, res, t_true, sensors, rng, source)
         results.append(res)
     return results
+
+
+def compiled_groups(model: PlatformModel, params: DynamicParameters, friction: str,
+                    engine: str) -> tuple[np.ndarray, ...] | None:
+    """The unit groups as the compiled loop takes them, or None for the numpy path: with
+    ``engine="numpy"``, or ``"auto"`` when numba is missing or a unit type has no kernel."""
+    if engine == "numpy":
+        return None
+    try:
+        from ropod_sysid import simulate_jit
+    except ImportError:
+        if engine == "numba":
+            raise InputError("engine 'numba': numba is not installed; pip install numba, or "
+                             "use engine 'numpy'") from None
+        return None
+    groups = simulate_jit.groups_of(model, params, friction)
+    if groups is None and engine == "numba":
+        raise InputError(f"engine 'numba': a unit type of {model.platform.source} "
+                         f"({', '.join(model.platform.types)}) has no compiled kernel; use "
+                         "engine 'numpy'")
+    return groups
 
 
 def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,

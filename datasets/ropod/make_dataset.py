@@ -8,7 +8,8 @@ thesis Sec. VI-A, as ``ropod-sysid trajectory typical --duration 60`` writes the
 ``original.csv.gz`` … ``mirrored_negated.csv.gz``, their simulated runs: 100 Hz logs with
 2¹⁴-count encoders, 30 mA current noise and 0.5 ms timestamp jitter. Values are rounded far
 below the sensor resolution (angles to 1e-7 rad, currents to 1e-5 A, time to 1 µs) and
-gzip-compressed, which keeps the set under 5 MB. Takes a few minutes (RK4 at 1 kHz).
+gzip-compressed, which keeps the set under 5 MB. Takes a few seconds (RK4 at 1 kHz, compiled;
+minutes with the numpy path).
 """
 
 from __future__ import annotations

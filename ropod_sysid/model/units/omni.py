@@ -336,16 +336,30 @@ class OmniUnits:
         """
         if check_variant(variant) == "body":
             return np.zeros_like(data.wheel_rate)
-        if variant == "shared":
-            fov = np.full(self.n_units, float(params.get("fov", 0.0)))
-            foc = np.full(self.n_units, float(params.get("foc", 0.0)))
-        else:
-            fov = np.array([float(params.get(f"fov_{u}", params.get("fov", 0.0)))
-                            for u in self.names])
-            foc = np.array([float(params.get(f"foc_{u}", params.get("foc", 0.0)))
-                            for u in self.names])
+        fov, foc = self._coefficients(params, variant)
         phid = data.wheel_rate
         return fov * phid + foc * np.tanh(self.alpha * phid)
+
+    def _coefficients(self, params: Mapping[str, float], variant: FrictionVariant
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """(f_ov, f_oc) per unit (k,): zero with ``body`` friction."""
+        if variant == "body":
+            return np.zeros(self.n_units), np.zeros(self.n_units)
+        if variant == "shared":
+            return (np.full(self.n_units, float(params.get("fov", 0.0))),
+                    np.full(self.n_units, float(params.get("foc", 0.0))))
+        return (np.array([float(params.get(f"fov_{u}", params.get("fov", 0.0)))
+                          for u in self.names]),
+                np.array([float(params.get(f"foc_{u}", params.get("foc", 0.0)))
+                          for u in self.names]))
+
+    def compiled(self, params: Mapping[str, float], variant: FrictionVariant = "per-wheel"
+                 ) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The compiled one-sample kernel (:mod:`ropod_sysid.model.units.omni_jit`) and its
+        geometry and parameter arrays (ImportError without numba)."""
+        from ropod_sysid.model.units import omni_jit
+
+        return omni_jit, *omni_jit.arrays(self, params, variant)
 
     def friction_force(self, data: OmniData, params: Mapping[str, float],
                        variant: FrictionVariant = "per-wheel") -> None:

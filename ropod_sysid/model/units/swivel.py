@@ -633,6 +633,14 @@ class SwivelUnits:
         phidd = np.einsum("nkwq,nq->nkw", data.a_phi, qdd) + data.b_phi
         return qdd_cm, phidd
 
+    def compiled(self, params: Mapping[str, float], variant: FrictionVariant = "per-wheel"
+                 ) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The compiled one-sample kernel (:mod:`ropod_sysid.model.units.swivel_jit`) and its
+        geometry and parameter arrays (ImportError without numba)."""
+        from ropod_sysid.model.units import swivel_jit
+
+        return swivel_jit, *swivel_jit.arrays(self, params, variant)
+
     def kinetic_energy(self, data: SwivelData, params: Mapping[str, float]) -> np.ndarray:
         """Σ_i ½ m_wh |ṙ_icm|² + ½ J_zz,wh θ̇_i² + ½ J_rot,w Σ_w φ̇_iw² [J]; shape (N,)."""
         t = (0.5 * params["m_wh"] * (data.rd_cm**2).sum(-1)
