@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import click
 
@@ -10,6 +11,7 @@ from ropod_sysid.cli.common import (
     INPUT,
     LOG_INPUT,
     SpanType,
+    given,
     platform_option,
     quiet_option,
     reports_errors,
@@ -20,7 +22,7 @@ from ropod_sysid.fit import FitOptions, FitResult, fit_files
 from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.paramfile import ParameterFile, write_parameter_file
+from ropod_sysid.io.paramfile import DEFAULT_NODE, ParameterFile, write_parameter_file
 from ropod_sysid.io.timebase import GAP_RULE
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
@@ -134,6 +136,9 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               help="Parameter file to write.")
 @click.option("--format", "fmt", type=click.Choice(["json", "yaml", "ros2", "kelo"]),
               default="json", show_default=True, help="Parameter file format.")
+@click.option("--node-name", default=DEFAULT_NODE, show_default=True,
+              help="With --format ros2: the ROS 2 node the parameters are for (letters, digits "
+                   "and underscores, not starting with a digit).")
 @click.option("--friction", type=click.Choice(["per-wheel", "shared", "body"]),
               default="per-wheel", show_default=True,
               help="Friction coefficients per wheel and pivot, shared by the wheels (and the "
@@ -172,7 +177,8 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 @writes(outputs={"out_path": "--out", "report_path": "--report"},
         inputs={"logs": "LOGS", "platform_path": "--platform", "compare_path": "--compare",
                 "validate_logs": "--validate"})
-def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, friction: str,
+def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, node_name: str,
+            friction: str,
             span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
@@ -185,6 +191,11 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     """
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
                           row_step, split_gaps)
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", node_name):
+        raise InputError(f"--node-name {node_name!r}: a ROS 2 node name has letters, digits and "
+                         "underscores and does not start with a digit, e.g. ropod_dynamic_model")
+    if given("node_name") and fmt != "ros2":
+        raise InputError(f"--node-name {node_name}: applies to --format ros2 only")
     platform = load_platform(platform_path)
 
     def say(msg: str) -> None:
@@ -202,7 +213,8 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     result = fit_files(list(logs), platform, options, workers=workers,
                        dask_address=dask_address, quiet=quiet, plots=report_path is not None)
     check_enough(result, logs)
-    write_parameter_file(result.parameter_file(), out_path, fmt, platform)  # type: ignore[arg-type]
+    write_parameter_file(result.parameter_file(), out_path, fmt, platform,  # type: ignore[arg-type]
+                         node_name=node_name)
     validation = None
     if validate_logs and report_path is None:
         validation = validate_sources(list(validate_logs), platform, result.fitted_parameters(),

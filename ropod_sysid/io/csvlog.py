@@ -484,11 +484,12 @@ def write_csv_log(log: Log, path: str | Path) -> None:
     gzip-compressed when the name ends in ``.gz``.
 
     Floats are written in the shortest form that reads back to the identical float64, so
-    :func:`read_csv_log` of the written file returns bit-identical arrays. Pose rows without a
-    tracker frame (NaN) are written as empty cells.
+    :func:`read_csv_log` of the written file returns bit-identical arrays — except that a
+    negative zero is written as ``0``. Pose rows without a tracker frame (NaN) are written as
+    empty cells.
     """
     cols = log.columns()
-    table = pa.table({k: pa.array(np.ascontiguousarray(v, dtype=np.float64),
+    table = pa.table({k: pa.array(np.asarray(v, dtype=np.float64) + 0.0,  # (no "-0")
                                   mask=np.isnan(v) if k in POSE_COLUMNS else None)
                       for k, v in cols.items()})
     opener = gzip.open if str(path).lower().endswith(".gz") else open

@@ -122,15 +122,24 @@ class Trajectory:
         return np.hypot(rates[:, 0] - self.omega * self.vy, rates[:, 1] + self.omega * self.vx)
 
     def write_csv(self, path: str | Path) -> None:
-        """Write ``t, vx, vy, omega, x, y, theta`` (header first, %.17g) atomically."""
+        """Write ``t, vx, vy, omega, x, y, theta`` (header first, shortest exact floats)
+        atomically."""
         atomic_write_text(path, trajectory_csv_text(self))
 
 
+def _shortest(v: float) -> str:
+    """``repr`` of a float without a trailing ``.0`` (``1.0`` → ``1``)."""
+    text = repr(v)
+    return text[:-2] if text.endswith(".0") else text
+
+
 def trajectory_csv_text(traj: Trajectory) -> str:
-    """The CSV text of a trajectory (exact floats, ``\\n`` line ends)."""
+    """The CSV text of a trajectory (``\\n`` line ends): every float in the shortest form that
+    reads back to it (``0.005``, not ``0.0050000000000000001``), a negative zero as ``0``."""
     data = np.column_stack([traj.t, traj.vx, traj.vy, traj.omega, traj.x, traj.y, traj.theta])
+    data = data + 0.0  # −0.0 + 0.0 is +0.0
     lines = [",".join(COLUMNS)]
-    lines += [",".join(f"{v:.17g}" for v in row) for row in data.tolist()]
+    lines += [",".join(map(_shortest, row)) for row in data.tolist()]
     return "\n".join(lines) + "\n"
 
 
