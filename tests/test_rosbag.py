@@ -134,3 +134,30 @@ def test_damaged_and_empty_recordings_are_one_line_errors(tmp_path, off_square,
     with pytest.raises(InputError, match=r"junk.bag: cannot read the recording .*is it a ROS 1 "
                                          "bag or a rosbag2 directory"):
         read_log(tmp_path / "junk.bag", off_square)
+
+
+def test_shipped_message_definition_is_the_one_written(tmp_path, off_square,
+                                                     runs_off_square) -> None:
+    """msg/ropod_sysid_msgs holds the writer's message, and a written ROS 2 MCAP file carries
+    it, wall-clock log times and the publisher's QoS for ros2 bag play."""
+    import dataclasses
+
+    import yaml
+    from mcap.reader import make_reader
+
+    from ropod_sysid.io.mcaplog import write_mcap_log
+
+    shipped = Path(__file__).resolve().parents[1] / "msg" / "ropod_sysid_msgs" / "msg"
+    assert (shipped / "LogSample.msg").read_text() == CONTRACT_MSGDEF
+    log = runs_off_square[0].log
+    wall = dataclasses.replace(log, t=log.t + 1.7e9)
+    write_mcap_log(wall, tmp_path / "run.mcap", "ros2")
+    with open(tmp_path / "run.mcap", "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        (channel,) = summary.channels.values()
+        first = next(reader.iter_messages())[2]
+    assert summary.schemas[channel.schema_id].data.decode() == CONTRACT_MSGDEF
+    qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])
+    assert qos[0]["reliability"] == 1 and qos[0]["depth"] == 10
+    assert first.log_time == round(wall.t[0] * 1e9)  # the date is kept

@@ -78,6 +78,14 @@ POSE_FIELDS = ("x_b", "y_b", "theta_b")
 _MAX_CHUNK = 1 << 30   # a larger uncompressed chunk size is taken for damage
 _LIBRARY = "ropod-sysid"
 
+# rosbag2's description of a reliable, volatile publisher keeping the last 10 messages (what
+# `ros2 bag play` needs to republish the channel)
+OFFERED_QOS = ("- history: 1\n  depth: 10\n  reliability: 1\n  durability: 2\n"
+               "  deadline:\n    sec: 9223372036\n    nsec: 854775807\n"
+               "  lifespan:\n    sec: 9223372036\n    nsec: 854775807\n"
+               "  liveliness: 1\n  liveliness_lease_duration:\n    sec: 9223372036\n"
+               "    nsec: 854775807\n  avoid_ros_namespace_conventions: false\n")
+
 CONTRACT_MSGDEF = """\
 # One control cycle of a ropod-sysid log: the log channels of every unit (SI units).
 float64 t          # time [s]
@@ -116,11 +124,13 @@ def write_mcap_log(log: Log, path: str | Path, encoding: str = "json",
 
 
 def _log_times(t: np.ndarray) -> list[int]:
-    """Message log times [ns] from the sample times, relative to the first sample (≥ 0)."""
+    """Message log times [ns] from the sample times: the times themselves when they are ≥ 0
+    (a wall-clock ``t`` keeps its date, so the file lines up with the other recordings of the
+    run), else relative to the first sample."""
     t = np.asarray(t, dtype=np.float64)
     if t.size == 0:
         return []
-    ns = np.round((t - t[0]) * 1e9)
+    ns = np.round((t if t[0] >= 0 else t - t[0]) * 1e9)
     return np.clip(ns, 0, 2.0**63 - 1).astype(np.int64).tolist()
 
 
@@ -205,7 +215,8 @@ def _write_contract_ros2(log: Log, f: IO[bytes], topic: str, log_times: list[int
     encode = serialize_dynamic(CONTRACT_ROS2_SCHEMA, CONTRACT_MSGDEF)[CONTRACT_ROS2_SCHEMA]
     schema_id = writer.register_schema(CONTRACT_ROS2_SCHEMA, "ros2msg", CONTRACT_MSGDEF.encode())
     channel_id = writer.register_channel(topic, "cdr", schema_id,
-                                         {"layout": "ropod_sysid/contract"})
+                                         {"layout": "ropod_sysid/contract",
+                                          "offered_qos_profiles": OFFERED_QOS})
     units = list(log.units)
     if any(ch.field not in ("delta", "phi_L", "phi_R", "cur_L", "cur_R")
            for ch in (*log.layout.angle_channels, *log.layout.current_channels)):

@@ -539,7 +539,7 @@ def _write_csv(f: dict[str, np.ndarray], path: Path) -> None:
 
 def _write_mcap(f: dict[str, np.ndarray], recv: np.ndarray, out: Any, encoding: str,
                 topic: str) -> None:
-    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.io.mcaplog import OFFERED_QOS, new_writer
 
     n_frames, n = f["sensor_ts"].shape
     lists = {name: f[name].tolist() for name in SW_FIELDS}
@@ -559,7 +559,8 @@ def _write_mcap(f: dict[str, np.ndarray], recv: np.ndarray, out: Any, encoding: 
         writer = new_writer(out, profile="ros2")
         schema_id = writer.register_schema(SW_ROS2_SCHEMA, "ros2msg", SW_MSGDEF.encode())
         payload = serialize_dynamic(SW_ROS2_SCHEMA, SW_MSGDEF)[SW_ROS2_SCHEMA]
-        channel_id = writer.register_channel(topic, "cdr", schema_id)
+        channel_id = writer.register_channel(topic, "cdr", schema_id,
+                                             {"offered_qos_profiles": OFFERED_QOS})
     for k in range(n_frames):
         msg = {"sensors": [{name: lists[name][k][i] for name in SW_FIELDS} for i in range(n)]}
         writer.add_message(channel_id, recv_l[k], payload(msg), recv_l[k], k)
