@@ -24,6 +24,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.units import FRICTION_VARIANTS
 from ropod_sysid.params import (
     DISSIPATIVE_SIGN,
+    UNITS_OF,
     DynamicParameters,
     Friction,
     friction_names,
@@ -134,7 +135,8 @@ class FitResult:
         for j, name in enumerate(sol.names):
             std = sol.std[j]
             entry: dict[str, object] = {"value": float(values[j]),
-                                        "std": None if not np.isfinite(std) else float(std)}
+                                        "std": None if not np.isfinite(std) else float(std),
+                                        "unit": UNITS_OF.get(kind_of(name), "")}
             if sol.combination[j]:
                 entry["combination"] = True
                 entry["meaning"] = sol.combinations.get(name, "")
@@ -153,6 +155,10 @@ class FitResult:
                       "rms": {"translation": lf.rms["translation"],
                               "rotation": lf.rms["rotation"]}} for lf in self.logs],
         }
+        extras["model"] = {
+            "platform": self.platform.to_dict(),
+            "conventions": MODEL_CONVENTIONS,
+        }
         if sol.fixed:
             extras["fixed"] = dict(sol.fixed)
         if sol.null_space.shape[1]:
@@ -163,6 +169,16 @@ class FitResult:
         return ParameterFile(self.platform.name, params,  # type: ignore[arg-type]
                              {"translation": rms["translation"], "rotation": rms["rotation"]},
                              sol.condition_number, sol.rank, self.samples, extras)
+
+
+MODEL_CONVENTIONS = (
+    "SI units. Base pose q_b = (x_b, y_b, theta_b) in the world frame; the direct equations of "
+    "motion M_dir(q) q_b'' = B_Fb F_b + B_tau (tau + tau_f) + f_f + b_dir (the thesis's eq. 65), "
+    "tau = torque_constant x motor current of each actuator. Friction is added to the motor "
+    "torque: c_v rate + c_c tanh(friction_tanh_gain rate), so dissipative wheel friction is "
+    "negative; a smart wheel's pivot friction acts on the base with +tau_fp, dissipative >= 0; "
+    "body-axis friction (fbv_*, fbc_*) is a force along the base's own axes. Values marked "
+    "'combination' are determined only together with others ('meaning').")
 
 
 def _span_of(pfile: ParameterFile, where: str) -> Span:
