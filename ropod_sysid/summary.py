@@ -10,6 +10,7 @@ import numpy as np
 from ropod_sysid.fit import FitResult
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
+from ropod_sysid.solve import Solution
 from ropod_sysid.validate import LogValidation
 
 
@@ -60,6 +61,27 @@ def _comparison_cells(value: float, std: float, other: float | None) -> str:
             f" {'' if z is None else f'{z:+.2f}':>6}")
 
 
+def compared_values(sol: Solution, other: dict[str, float]) -> dict[str, float]:
+    """The compared file's values as the fit reports its own: where the logs determine a value
+    only in combination (the dependent parameters set to 0, the others standing for
+    name + K·dependent), the compared values moved along the fit's null space so that its
+    dependent parameters are 0 too — its value of the same combination, not its raw value.
+    Other names (and compared files that lack a parameter of the combination) as given."""
+    out = dict(other)
+    dep = [j for j, n in enumerate(sol.names) if sol.combination[j]
+           and sol.combinations.get(n, "").startswith("not identifiable")]
+    ns = sol.null_space
+    if not dep or ns.shape[1] == 0 or not all(n in other for n in sol.names):
+        return out
+    x = np.array([other[n] for n in sol.names], float)
+    c, *_ = np.linalg.lstsq(ns[dep], -x[dep], rcond=None)
+    moved = x + ns @ c
+    for j, n in enumerate(sol.names):
+        if sol.combination[j]:
+            out[n] = float(0.0 if j in dep else moved[j])
+    return out
+
+
 def format_fit(result: FitResult, compare: ParameterFile | None = None,
                compare_label: str | None = None) -> str:
     """Parameter table, RMS per translation/rotation and per log, rank and condition; with
@@ -67,14 +89,15 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
     sol = result.solution
     shown = result.physical.values if result.physical is not None else sol.values
     rel = relative_std(result)
-    other = compare.values() if compare is not None else {}
+    other = compared_values(sol, compare.values()) if compare is not None else {}
     lines = []
     head = "physically consistent fit" if result.physical is not None else "fit"
     lines.append(f"{head}: {len(result.logs)} log(s), {result.samples} samples, "
                  f"friction {result.options.friction}, span {result.options.span}")
     if compare is not None:
         lines.append(f"compared with {compare_label or 'the comparison'}: Δ% = (value − "
-                     "compared)/|compared|, Δ/σ = (value − compared)/std")
+                     "compared)/|compared|, Δ/σ = (value − compared)/std; a combination is "
+                     "compared with the compared values' same combination")
     columns = (f" {'compared':>12} {'Δ%':>8} {'Δ/σ':>6}" if compare is not None else "")
     lines.append(f"{'parameter':<10} {'value':>12} {'std':>10} {'rel.std':>8}{columns}  "
                  "unit        note")

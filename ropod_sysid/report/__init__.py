@@ -58,7 +58,13 @@ from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
 from ropod_sysid.solve import combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
-from ropod_sysid.summary import difference, identifiability_verdict, implausible, relative_std
+from ropod_sysid.summary import (
+    compared_values,
+    difference,
+    identifiability_verdict,
+    implausible,
+    relative_std,
+)
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
 
 __all__ = ["read_comparison", "render_fit_report", "result_from_parameter_file",
@@ -257,7 +263,7 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
                     compare: ParameterFile | None) -> tuple[list[dict[str, Any]], list[str]]:
     sol = result.solution
     rel = relative_std(result)
-    other = compare.values() if compare is not None else {}
+    other = compared_values(sol, compare.values()) if compare is not None else {}
     other_std = compare.stds() if compare is not None else {}
     rows = []
     for j, name in enumerate(sol.names):
