@@ -59,7 +59,8 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     validation = pieces_of(validate_paths, platform, split_gaps, span or file_span, row_step)
     # each log streamed once: triangles and what the report draws
     result, notes = result_from_parameter_file(platform, list(logs), pfile, span,
-                                               where=params_path, split_gaps=split_gaps)
+                                               where=params_path, split_gaps=split_gaps,
+                                               quiet=quiet)
     write_fit_report(result, None, out_path, compare=compare, compare_label=compare_label,
                      validation_logs=validation, params_source=params_path, notes=notes)
     if not quiet:

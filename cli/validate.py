@@ -15,7 +15,7 @@ from ropod_sysid.cli.common import (
 )
 from ropod_sysid.cli.fit import dask_option, split_gaps_option, workers_option
 from ropod_sysid.fit import fit_settings, parameters_of
-from ropod_sysid.io.paramfile import read_parameter_file
+from ropod_sysid.io.paramfile import read_parameters
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
@@ -28,7 +28,8 @@ from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
 @click.argument("logs", nargs=-1, required=True, type=LOG_INPUT)
 @platform_option
 @click.option("--params", "params_path", required=True, type=INPUT,
-              help="Parameter file of a fit.")
+              help="Parameter file of a fit, or a flat name: value mapping (a simulation's "
+                   "truth).")
 @click.option("--span", type=SpanType(), default=None,
               help="LOESS span: an odd number of samples or seconds (default: the fit's).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object for scripts.")
@@ -45,7 +46,7 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: S
     Each log is read and processed in chunks; with --workers or --dask the logs are processed
     in parallel on Dask workers."""
     platform = load_platform(platform_path)
-    pfile = read_parameter_file(params_path)
+    pfile = read_parameters(params_path, platform)  # a fit's file, or a flat truth.json
     _, values = parameters_of(pfile, platform, params_path)
     params = DynamicParameters.from_mapping(values, platform, params_path)
     file_span, delay, row_step = fit_settings(pfile, params_path)  # as the fit was made

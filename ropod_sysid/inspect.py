@@ -79,6 +79,7 @@ class Inspection:
     enough_to_fit: bool
     reasons: list[str] = field(default_factory=list)  # why not, when not
     warnings: list[str] = field(default_factory=list)
+    column_units: dict[str, str] = field(default_factory=dict)  # column → SI unit
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready data."""
@@ -101,7 +102,8 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     gap_idx = np.flatnonzero(dt > c.gap_factor * dt_med) if dt.size else np.zeros(0, int)
     gaps = [Gap(int(k), float(t[k]), float(dt[k])) for k in gap_idx[:20]]
     dropped = sum(int(m.group(1)) for note in log.notes for m in _DROPPED.finditer(note))
-    ranges = {k: (float(np.min(v)), float(np.max(v))) for k, v in log.columns().items()}
+    ranges = {k: (float(np.nanmin(v)) + 0.0, float(np.nanmax(v)) + 0.0)  # (no "-0")
+              for k, v in log.columns().items()}
 
     vel, moving_time = _base_velocity(log, platform, t, dt_med, c)
     names = ("vx", "vy", "omega")
@@ -151,7 +153,17 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         dropped_frames=dropped, notes=list(log.notes), ranges=ranges,
         velocity_ranges=vel_ranges, moving_time=moving_time, pivot_coverage=coverage,
         enough_to_fit=not reasons, reasons=reasons, warnings=notes_w,
+        column_units=_column_units(log),
     )
+
+
+def _column_units(log: Log) -> dict[str, str]:
+    """The SI unit of every column of the log (each unit type's channels)."""
+    lay = log.layout
+    out = {"t": "s"}
+    out |= {n: c.unit for n, c in zip(lay.angle_names, lay.angle_channels, strict=True)}
+    out |= {n: c.unit for n, c in zip(lay.current_names, lay.current_channels, strict=True)}
+    return out | {"x_b": "m", "y_b": "m", "theta_b": "rad"}
 
 
 def motion_shortfall(seconds: float, what: str = "of motion",
@@ -210,7 +222,7 @@ def format_inspection(ins: Inspection) -> str:
         f"moving     {ins.moving_time:.1f} s",
         "velocity   " + ", ".join(f"{k} [{lo:.3g}, {hi:.3g}]"
                                   for k, (lo, hi) in ins.velocity_ranges.items())
-        + "  (1st–99th percentile, base frame)",
+        + "  (1st–99th percentile, base frame; m/s, m/s, rad/s)",
         *(["pivots     " + ", ".join(f"{u}: {deg:.0f}°"
                                      for u, deg in ins.pivot_coverage.items())
            + "  of the circle visited"] if ins.pivot_coverage else []),
@@ -218,7 +230,7 @@ def format_inspection(ins: Inspection) -> str:
     ]
     width = max((len(k) for k in ins.ranges), default=0)
     for k, (lo, hi) in ins.ranges.items():
-        lines.append(f"  {k:<{width}}  {lo:>12.6g}  {hi:>12.6g}")
+        lines.append(f"  {k:<{width}}  {lo:>12.6g}  {hi:>12.6g}  {ins.column_units.get(k, '')}")
     for note in ins.notes:
         lines.append(f"note       {note}")
     for w in ins.warnings:

@@ -152,4 +152,22 @@ def format_validation(results: Sequence[LogValidation]) -> str:
                      f"{v.rms['y']:>8.3g} {v.rms['theta']:>8.3g} {f_rms:>8.3g} "
                      f"{v.observer_rms['T_bz']:>8.3g} {100 * v.share_above['force']:>5.1f}% "
                      f"{100 * v.share_above['torque']:>5.1f}%")
+    lines.append(validation_verdict(results))
     return "\n".join(lines)
+
+
+def validation_verdict(results: Sequence[LogValidation]) -> str:
+    """One line: whether the disturbance observer stays below its thresholds (Sec. VII-C:
+    40 N, 10 N m) on every log — the fitted model explains the motion — and where not."""
+    from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
+
+    bad = [v for v in results if v.share_above["force"] > 0 or v.share_above["torque"] > 0]
+    if not bad:
+        return (f"verdict    the model explains every log: the observer stays below "
+                f"{FORCE_THRESHOLD:g} N and {TORQUE_THRESHOLD:g} N m throughout")
+    worst = max(bad, key=lambda v: max(v.share_above["force"], v.share_above["torque"]))
+    return (f"verdict    the observer exceeds its thresholds on {len(bad)} of {len(results)} "
+            f"log{'s' if len(results) > 1 else ''} (worst {worst.source}: "
+            f"{100 * worst.share_above['force']:.1f} % of the samples above "
+            f"{FORCE_THRESHOLD:g} N, {100 * worst.share_above['torque']:.1f} % above "
+            f"{TORQUE_THRESHOLD:g} N m): a collision, a push, or a model that does not fit")

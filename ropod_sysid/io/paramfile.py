@@ -288,6 +288,22 @@ def read_parameter_file(path: str | Path) -> ParameterFile:
     return ParameterFile.from_dict(data, where)
 
 
+def read_parameters(path: str | Path, platform: Platform) -> ParameterFile:
+    """A fit's parameter file, or a flat mapping name → value (a simulation's truth) as a
+    parameter file of ``platform`` without standard deviations; the parameter file's error
+    when it is neither."""
+    try:
+        return read_parameter_file(path)
+    except InputError as exc:
+        try:
+            values = read_truth_parameters(path, platform)
+        except InputError:
+            raise exc from None
+    return ParameterFile(platform.name, {k: {"value": v, "std": None} for k, v in values.items()},
+                         {"translation": float("nan"), "rotation": float("nan")},
+                         float("nan"), 0, 0)
+
+
 def read_truth_parameters(path: str | Path, platform: Platform) -> dict[str, float]:
     """name → value from a parameter file (json/yaml/ros2) or a flat mapping name → number.
 

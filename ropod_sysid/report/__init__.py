@@ -45,7 +45,7 @@ from ropod_sysid.fit import (
 from ropod_sysid.io import check_distinct
 from ropod_sysid.io.atomic import atomic_write_text
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.paramfile import ParameterFile, read_parameter_file, read_truth_parameters
+from ropod_sysid.io.paramfile import ParameterFile, read_parameters
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
@@ -54,6 +54,7 @@ from ropod_sysid.params import (
     parameter_names,
 )
 from ropod_sysid.platform import Platform
+from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
 from ropod_sysid.solve import combined_rms
@@ -79,7 +80,8 @@ WEAK_RELATIVE_STD = 0.2  # the summary's threshold for "weakly determined"
 
 def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile: ParameterFile,
                                span: Span | None = None, where: str = "<parameters>",
-                               split_gaps: bool = False) -> tuple[FitResult, list[str]]:
+                               split_gaps: bool = False, quiet: bool = True,
+                               ) -> tuple[FitResult, list[str]]:
     """What a report needs, from a parameter file and logs, without refitting.
 
     The values and standard deviations are the file's; the per-log and total residual RMS are
@@ -115,9 +117,12 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     check_distinct([log for log in logs if not isinstance(log, Log)])
     for log in logs:
         check_source(log, platform)
-    streamed = [res for log in logs
-                for res in stream_pieces(log, platform, span, delay, friction,
-                                         row_step=row_step, split_gaps=split_gaps, plot=True)]
+    streamed = []
+    with Progress(len(logs), "logs", quiet=quiet) as bar:  # (a bar on a terminal only)
+        for log in logs:
+            streamed += stream_pieces(log, platform, span, delay, friction, row_step=row_step,
+                                      split_gaps=split_gaps, plot=True)
+            bar.update(1)
     systems = [res.triangles for res in streamed]
     sol, weights = fit_systems(systems, names, options)
 
@@ -415,16 +420,7 @@ def read_comparison(compare: str | Path | ParameterFile | None, label: str | Non
         return None, None
     if isinstance(compare, ParameterFile):
         return compare, label or "comparison"
-    try:
-        pfile = read_parameter_file(compare)
-    except InputError as exc:
-        try:
-            values = read_truth_parameters(compare, platform)
-        except InputError:
-            raise exc from None
-        pfile = ParameterFile("", {k: {"value": v, "std": None} for k, v in values.items()},
-                              {"translation": float("nan"), "rotation": float("nan")},
-                              float("nan"), 0, 0)
+    pfile = read_parameters(compare, platform)
     return pfile, label or Path(compare).name
 
 
