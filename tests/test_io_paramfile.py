@@ -17,7 +17,7 @@ from ropod_sysid.io.paramfile import (
     write_parameter_file,
 )
 from ropod_sysid.params import parameter_names
-from ropod_sysid.platform import ropod_platform
+from ropod_sysid.platform import platform_from_dict, ropod_platform
 
 PLATFORM = ropod_platform()
 
@@ -161,18 +161,31 @@ def test_ros2_dotted_keys_read(tmp_path):
 
 
 def test_kelo_layout(tmp_path):
+    """A ROS 2 parameter file for kelo_tulip's platform_driver: num_wheels first (the driver
+    reads it before the geometry), each wheel's ethercat_number from the platform file."""
     pf = make_pf()
     p = tmp_path / "kelo.yaml"
-    write_parameter_file(pf, p, "kelo", PLATFORM)
-    data = yaml.safe_load(p.read_text())
-    assert list(data) == ["wheel_distance", "wheel_diameter", "num_wheels", "wheel0", "wheel1",
+    entries = PLATFORM.to_dict()
+    for k, unit in enumerate(entries["units"]):
+        unit["ethercat_number"] = 3 + 2 * k
+    platform = platform_from_dict(entries, "kelo-platform.yaml")
+    write_parameter_file(pf, p, "kelo", platform)
+    (node,) = yaml.safe_load(p.read_text()).items()
+    assert node[0] == "platform_driver" and list(node[1]) == ["ros__parameters"]
+    data = node[1]["ros__parameters"]
+    assert list(data) == ["num_wheels", "wheel_distance", "wheel_diameter", "wheel0", "wheel1",
                           "wheel2", "wheel3", "dynamics"]
     assert data["wheel_distance"] == 0.08
     assert data["wheel_diameter"] == pytest.approx(0.105)
     assert data["num_wheels"] == 4
-    assert data["wheel2"] == {"x": -0.21, "y": -0.21, "a": 0.0}
+    assert data["wheel2"] == {"ethercat_number": 7, "x": -0.21, "y": -0.21, "a": 0.0}
     assert data["dynamics"] == pf.values()
     assert "KELO driver file" in bad(p)
+    with pytest.raises(InputError) as err:
+        write_parameter_file(pf, tmp_path / "k2.yaml", "kelo", PLATFORM)
+    assert str(err.value) == (f"{PLATFORM.source}: the KELO format needs every unit's "
+                              "'ethercat_number' (the drive's EtherCAT slave number); add it to "
+                              "units 1, 2, 3, 4")
 
 
 @pytest.mark.parametrize("fmt", ["ros2", "kelo"])

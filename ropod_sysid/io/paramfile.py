@@ -24,9 +24,11 @@ Formats (``write_parameter_file(..., fmt=...)``):
     ``rank``, ``samples``. Extras go under ``metadata``; values ROS 2 parameters cannot hold
     (nested lists, mixed lists, empty lists) are stored as JSON strings, ``None`` is left out.
 ``kelo``
-    The KELO driver layout: ``wheel_distance``, ``wheel_diameter``, ``num_wheels``, ``wheel0``,
-    ``wheel1``, … each ``{x, y, a}`` (pivot position and pivot encoder offset), and the
-    identified values under ``dynamics``. Write-only.
+    The ROS 2 parameter file of the KELO driver (``kelo_tulip``'s ``platform_driver`` node,
+    under ``ros__parameters``): ``num_wheels`` first, ``wheel_distance``, ``wheel_diameter``,
+    ``wheel0``, ``wheel1``, … each ``{ethercat_number, x, y, a}`` (the platform file's
+    per-unit ``ethercat_number``, pivot position and pivot encoder offset), and the identified
+    values under ``dynamics``. Write-only.
 
 :func:`read_parameter_file` reads json, yaml and ros2 files (YAML with the safe loader only).
 """
@@ -228,19 +230,31 @@ def _ros2_dict(pf: ParameterFile, platform: Platform, node_name: str) -> dict[st
     return {node_name: {"ros__parameters": params}}
 
 
+KELO_NODE = "platform_driver"  # the KELO ROS 2 driver's node (kelo_tulip)
+
+
 def _kelo_dict(pf: ParameterFile, platform: Platform) -> dict[str, Any]:
+    """The ROS 2 parameter file the KELO driver (``kelo_tulip``'s ``platform_driver``) loads:
+    ``num_wheels`` first (the driver reads it before anything else), the wheel geometry, per
+    wheel its ``ethercat_number`` (the platform file's per-unit key), position and pivot
+    offset ``a``, and the fitted model under ``dynamics``."""
     check_all_swivel(platform, "the KELO format")
+    missing = [u.name for u in platform.units if u.ethercat_number is None]
+    if missing:
+        raise InputError(f"{platform.source}: the KELO format needs every unit's "
+                         f"'ethercat_number' (the drive's EtherCAT slave number); add it to "
+                         f"unit{'s' if len(missing) > 1 else ''} {', '.join(missing)}")
     first = platform.units[0]
     data: dict[str, Any] = {
+        "num_wheels": platform.n_units,
         "wheel_distance": float(first.wheel_distance),
         "wheel_diameter": 2.0 * float(first.wheel_radius),
-        "num_wheels": platform.n_units,
     }
     for i, u in enumerate(platform.units):
-        data[f"wheel{i}"] = {"x": float(u.pivot[0]), "y": float(u.pivot[1]),
-                             "a": float(u.pivot_offset)}
+        data[f"wheel{i}"] = {"ethercat_number": int(u.ethercat_number), "x": float(u.pivot[0]),
+                             "y": float(u.pivot[1]), "a": float(u.pivot_offset)}
     data["dynamics"] = {str(k): float(v["value"]) for k, v in pf.parameters.items()}
-    return data
+    return {KELO_NODE: {"ros__parameters": data}}
 
 
 def _ros_value(value: Any) -> Any:
@@ -279,12 +293,13 @@ def read_parameter_file(path: str | Path) -> ParameterFile:
     where = str(path)
     data = _load_mapping(Path(path), where, "parameter file")
     node = _ros2_node(data)
-    if node is not None:
-        return _from_ros2(*node, where)
-    if isinstance(data, dict) and "wheel0" in data and "dynamics" in data \
-            and "parameters" not in data:
+    kelo = node[1] if node is not None else data
+    if isinstance(kelo, dict) and "wheel0" in kelo and "dynamics" in kelo \
+            and "parameters" not in kelo:
         raise InputError(f"{where}: this is a KELO driver file (write-only, no statistics); "
                          "read the json, yaml or ros2 parameter file instead")
+    if node is not None:
+        return _from_ros2(*node, where)
     return ParameterFile.from_dict(data, where)
 
 

@@ -90,6 +90,7 @@ class SwivelSpec:
     sign_right: int = 1
     pivot_offset: float = 0.0
     type: str = "swivel"
+    ethercat_number: int | None = None  # the drive's EtherCAT slave number (KELO driver)
 
     @property
     def position(self) -> tuple[float, float]:
@@ -110,7 +111,7 @@ class SwivelSpec:
             if getattr(self, key) != defaults.get(key):
                 d[key] = getattr(self, key)
         for key, plain in (("left_motor", 1), ("sign_left", 1), ("sign_right", 1),
-                           ("pivot_offset", 0.0)):
+                           ("pivot_offset", 0.0), ("ethercat_number", None)):
             if getattr(self, key) != plain:
                 d[key] = getattr(self, key)
         return d
@@ -218,7 +219,7 @@ class SwivelUnits:
                 Channel("cur_{u}R", "cur_R", "A", "right motor current"))
     platform_keys = (*GEOMETRY, "torque_constant")
     entry_keys = ("name", "type", "pivot", *GEOMETRY, "torque_constant", "left_motor",
-                  "sign_left", "sign_right", "pivot_offset")
+                  "sign_left", "sign_right", "pivot_offset", "ethercat_number")
     inertial_names = ("m_wh", "Jzz_wh", "Jrot_w")
     parameter_info = {
         "m_wh": ("kg", "smart-wheel unit mass"),
@@ -290,9 +291,14 @@ class SwivelUnits:
                 f"{at if 'caster_offset' in entry else where}: 'caster_offset' must be nonzero "
                 "(the swivel model needs s_w ≠ 0); give the distance from the pivot axis to the "
                 "wheel axle in metres")
+        ethercat = entry.get("ethercat_number")
+        if ethercat is not None and (isinstance(ethercat, bool) or not isinstance(ethercat, int)
+                                     or ethercat < 1):
+            raise InputError(f"{where}: '{key}.ethercat_number' must be a whole number ≥ 1 (the "
+                             f"drive's EtherCAT slave number), got {ethercat!r}")
         return SwivelSpec(name, (float(pivot[0]), float(pivot[1])), geo["wheel_radius"],
                           geo["wheel_distance"], geo["caster_offset"], dx, k_t,
-                          int(left_motor), signs[0], signs[1], offset)
+                          int(left_motor), signs[0], signs[1], offset, "swivel", ethercat)
 
     @classmethod
     def group_key(cls, spec: SwivelSpec) -> Hashable:
