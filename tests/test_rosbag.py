@@ -161,3 +161,78 @@ def test_shipped_message_definition_is_the_one_written(tmp_path, off_square,
     qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])
     assert qos[0]["reliability"] == 1 and qos[0]["depth"] == 10
     assert first.log_time == round(wall.t[0] * 1e9)  # the date is kept
+
+
+KELO_DRIVE = """uint16  status1
+uint16  status2
+uint64  sensor_ts
+uint64  setpoint_ts
+float32 encoder_1
+float32 velocity_1
+float32 current_1_d
+float32 current_1_q
+float32 encoder_2
+float32 velocity_2
+float32 current_2_d
+float32 current_2_q
+float32 encoder_pivot
+float32 velocity_pivot
+float32 voltage_bus
+"""  # (kelo_tulip's KeloDriveInput has more fields; these are the ones the reader uses)
+KELO_DRIVES = ("std_msgs/Header header\nkelo_tulip/KeloDriveInput[] wheels\n" + "=" * 80
+               + "\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+               + "=" * 80 + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+               + "=" * 80 + "\nMSG: kelo_tulip/KeloDriveInput\n" + KELO_DRIVE)
+
+
+def test_kelo_drive_messages_read_like_the_smart_wheel_layout(tmp_path) -> None:
+    """The KELO driver's KeloDrivesInput (a wheels[] array after a header, float32 fields) in
+    a ROS 2 MCAP file and in a rosbag2 recording: read with the platform's per-unit motor
+    mapping, signs and pivot offsets, like the smart-wheel layout."""
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.io.smartwheel import raw_frames
+    from ropod_sysid.params import thesis_fixed_masses
+    from ropod_sysid.platform import load_platform
+    from ropod_sysid.simulate import simulate
+
+    from .conftest import four_variants
+
+    pf = load_platform(Path(__file__).resolve().parents[1] / "datasets" / "smartwheel"
+                       / "platform.yaml")  # swapped motors, a flipped sign, pivot offsets
+    (run,) = simulate(pf, thesis_fixed_masses(pf.unit_names), four_variants(2.0)[:1],
+                      rate=100.0)
+    fields, recv = raw_frames(run.log, pf)
+    name = "kelo_tulip/msg/KeloDrivesInput"
+    encode = serialize_dynamic(name, KELO_DRIVES)[name]
+    names = [ln.split()[1] for ln in KELO_DRIVE.splitlines() if ln.strip()]
+    msgs = []
+    for k in range(len(recv)):
+        wheels = [{f: (int(fields[f][k, i]) if f in ("status1", "status2", "sensor_ts",
+                                                     "setpoint_ts") else float(fields[f][k, i]))
+                   for f in names} for i in range(pf.n_units)]
+        msgs.append((int(recv[k]), encode({"header": {"stamp": {"sec": 0, "nanosec": 0},
+                                                      "frame_id": ""}, "wheels": wheels})))
+    with open(tmp_path / "kelo.mcap", "wb") as f:
+        w = new_writer(f, profile="ros2")
+        sid = w.register_schema(name, "ros2msg", KELO_DRIVES.encode())
+        cid = w.register_channel("/kelo_drives", "cdr", sid)
+        for k, (t, payload) in enumerate(msgs):
+            w.add_message(cid, t, payload, t, k)
+        w.finish()
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    ts.register(get_types_from_msg(KELO_DRIVE, "kelo_tulip/msg/KeloDriveInput"))
+    ts.register(get_types_from_msg("std_msgs/Header header\nkelo_tulip/KeloDriveInput[] wheels",
+                                   name))
+    with Bag2Writer(tmp_path / "kelo_bag", version=9) as w:
+        conn = w.add_connection("/kelo_drives", name, typestore=ts)
+        for t, payload in msgs:
+            w.write(conn, t, payload)
+    for path in (tmp_path / "kelo.mcap", tmp_path / "kelo_bag"):
+        back = read_log(path, pf)
+        assert back.n_samples == run.log.n_samples
+        np.testing.assert_allclose(P(back) - P(back)[0], P(run.log) - P(run.log)[0],
+                                   atol=1e-4 * np.abs(P(run.log)).max())  # float32 angles
+        np.testing.assert_allclose(np.cos(D(back)), np.cos(D(run.log)), atol=1e-6)
+        np.testing.assert_allclose(C(back), C(run.log), rtol=1e-6, atol=1e-6)

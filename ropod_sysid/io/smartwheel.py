@@ -17,6 +17,8 @@ which are carried but not used. Containers:
 
 * MCAP, JSON encoding: ``{"sensors": [{"sensor_ts": 1700000000000000000, "encoder_1": ...}, ...]}``
   (schema ``ropod_sysid/SmartWheelData``, jsonschema);
+* MCAP (or a ROS bag), the KELO driver's ``kelo_tulip/msg/KeloDrivesInput``: the same fields
+  per wheel in ``wheels[]``, after a ``std_msgs/Header``;
 * MCAP, ROS 2 encoding: schema ``ropod_sysid_msgs/msg/SmartWheelData`` (:data:`SW_MSGDEF`, a
   ``SmartWheelSensors[] sensors`` array; floats as float64 so that the drive's float32 values and
   simulated float64 ones both pass exactly);
@@ -110,9 +112,14 @@ float64 voltage_bus     # bus voltage [V]
 """
 
 
+KELO_SCHEMA = "kelo_tulip/msg/KeloDrivesInput"  # the KELO driver's per-wheel drive inputs
+
+
 def is_smartwheel_schema(name: str) -> bool:
-    """True for a schema name of the smart-wheel layout (ours or the robot's)."""
-    return "smartwheel" in name.lower().replace("_", "")
+    """True for a schema name of the smart-wheel layout: ours, the ropod's, or the KELO
+    driver's ``KeloDrivesInput`` (its ``wheels[]`` carry the same fields as ``sensors[]``)."""
+    plain = name.lower().replace("_", "")
+    return "smartwheel" in plain or "kelodrivesinput" in plain
 
 
 def smartwheel_json_schema() -> dict[str, Any]:
@@ -180,13 +187,13 @@ def frames_from_messages(decoded: Sequence[Any], platform: Platform, where: str,
     malformed = np.zeros(n_frames, dtype=bool)
     if encoding == "json":
         def sensors_of(m: Any) -> Any:
-            return m["sensors"]
+            return m["sensors"] if "sensors" in m or "wheels" not in m else m["wheels"]
 
         def get(s: Any, name: str) -> Any:
             return s[name]
     else:
-        def sensors_of(m: Any) -> Any:
-            return m.sensors
+        def sensors_of(m: Any) -> Any:  # (a KELO message holds them in ``wheels``)
+            return m.sensors if hasattr(m, "sensors") or not hasattr(m, "wheels") else m.wheels
 
         def get(s: Any, name: str) -> Any:
             return getattr(s, name)
