@@ -274,7 +274,14 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
     r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
     rows = 3 * sum(s.rows for s in systems)
     return solve(r, rows, names, options.fix, options.rcond,
-                 correlation=mean_correlation(systems)), weights
+                 correlation=mean_correlation(systems),
+                 stretches=weighted_stretches(systems, weights)), weights
+
+
+def weighted_stretches(systems: Sequence[Triangles], weights: Sequence[float]) -> np.ndarray:
+    """The stretches of all logs (:meth:`Triangles.weighted_stretches`), (K, p+1, p+1)."""
+    return np.concatenate([s.weighted_stretches(w)
+                           for s, w in zip(systems, weights, strict=True)])
 
 
 def mean_correlation(systems: Sequence[Triangles]) -> float:

@@ -34,7 +34,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_angles
 from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
-from ropod_sysid.solve import Triangles, qr_triangle
+from ropod_sysid.solve import STRETCH_S, Triangles, qr_triangle, stretch_grams
 from ropod_sysid.tracker import with_fused_pose
 
 DEFAULT_SPAN_S = 0.1
@@ -248,6 +248,11 @@ class RowGrid:
             return 1.0
         return float(1.0 / np.sum(signals.loess_kernel(self.span) ** 2))
 
+    def stretch_rows(self, dt: float) -> int:
+        """Rows per stretch of :data:`ropod_sysid.solve.STRETCH_S` seconds at sample time
+        ``dt`` (the unit the jackknife σ leaves out; :class:`ropod_sysid.solve.Triangles`)."""
+        return max(1, int(round(STRETCH_S / (dt * self.step))))
+
     def trim(self, k: int) -> int:
         """Samples dropped at each end of a log: the shifted end windows of the smoother
         over ``k`` samples and of the rows' LOESS (``k`` when ``step`` is 1)."""
@@ -421,10 +426,14 @@ def filtered_system(model: PlatformModel, pre: Preprocessed,
     return (np.concatenate([a for _, a, _ in parts]), np.concatenate([b for _, _, b in parts]))
 
 
-def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
+def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: int = 0,
+                    stretch_rows: int = 0) -> Triangles:
     """:meth:`Triangles.from_rows` of A (m, 3, p) and b (m, 3) by a two-level TSQR: leaves of
     :data:`QR_LEAF_ROWS` rows reduced by one batched QR, their triangles by one more. Same
-    triangle up to rounding (and row signs), several times faster on tall blocks."""
+    triangle up to rounding (and row signs), several times faster on tall blocks. With
+    ``stretch_rows`` also the stretches' normal-equation pieces
+    (:func:`ropod_sysid.solve.stretch_grams`; the block's first row is the log's row
+    ``first_row``)."""
     m, _, p = a.shape
     full = m // QR_LEAF_ROWS * QR_LEAF_ROWS
     r = np.empty((3, p + 1, p + 1))
@@ -439,15 +448,18 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
         if m > full:
             parts.append(rows[full:])
         r[d] = qr_triangle(np.vstack(parts))
-    return Triangles(r, m, label)
+    stretches = [stretch_grams(a, b, first_row, stretch_rows)] if stretch_rows else []
+    return Triangles(r, m, label, stretches=stretches, stretch_rows=stretch_rows)
 
 
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
               chunk: int = 20000) -> Triangles:
     """The log's QR triangles per DOF, built block by block (memory bounded by ``chunk``)."""
     tri: Triangles | None = None
-    for _, a, b in system(model, pre, friction, chunk):
-        block = block_triangles(a, b, pre.source)
+    per = pre.grid.stretch_rows(pre.dt)
+    for idx, a, b in system(model, pre, friction, chunk):
+        block = block_triangles(a, b, pre.source, (int(idx[0]) - pre.trim) // pre.grid.step,
+                                per)
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")

@@ -22,6 +22,8 @@ import scipy.linalg
 from ropod_sysid.errors import IdentifiabilityError, InputError
 
 DOF = ("x", "y", "theta")
+STRETCH_S = 2.0  # length of the stretches of a log the jackknife leaves out one at a time [s]
+MIN_STRETCHES = 4  # fewer stretches in all logs: no jackknife, the white-noise σ alone
 NULL_TOL = 1e-3  # relative size below which a null-space entry is treated as zero
 RCOND = 1e-4  # default: relative singular value below which a direction is unidentifiable
 
@@ -41,6 +43,24 @@ def qr_triangle(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
+def stretch_grams(a: np.ndarray, b: np.ndarray, first_row: int, stretch_rows: int,
+                  ) -> np.ndarray:
+    """(K, 2, p+1, p+1): [A b]ᵀ[A b] of the x and y rows together and of the θ rows of A
+    (m, 3, p) and b (m, 3), per stretch of ``stretch_rows`` rows counted from row 0 of the log,
+    the block's first row being row ``first_row`` (the first and last stretch of the block may
+    be partial; :meth:`Triangles.merge` joins them with the neighbouring blocks')."""
+    m, _, p = a.shape
+    cuts = np.arange(stretch_rows - first_row % stretch_rows, m, stretch_rows)
+    edges = np.concatenate([[0], cuts, [m]])
+    out = np.empty((len(edges) - 1, 2, p + 1, p + 1))
+    for i, (s, e) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+        ab = np.concatenate([a[s:e], b[s:e, :, None]], axis=2)
+        xy = ab[:, :2].reshape(-1, p + 1)
+        out[i, 0] = xy.T @ xy
+        out[i, 1] = ab[:, 2].T @ ab[:, 2]
+    return out
+
+
 def stack_triangles(triangles: Sequence[np.ndarray]) -> np.ndarray:
     """Combine triangles of row blocks into the triangle of all rows (TSQR step)."""
     return qr_triangle(np.vstack(list(triangles)))
@@ -56,6 +76,12 @@ class Triangles:
     correlation : rows per independent row: the LOESS over the rows makes neighbours share
         their noise (1/Σh² of its kernel h, for a residual white before that filter)
     duration : length of the log the rows come from [s]
+    stretches : per stretch of ``stretch_rows`` rows (:data:`STRETCH_S` seconds, counted from
+        the log's first row; the last one may be shorter), the normal-equation pieces
+        [A b]ᵀ[A b] of its x and y rows together and of its θ rows: a list of blocks of
+        (K, 2, p+1, p+1) arrays, in row order. O(duration) small matrices, from which the
+        jackknife σ (:func:`jackknife_covariance`) is formed after the solve, without a second
+        pass over the logs.
     """
 
     r: np.ndarray
@@ -64,6 +90,8 @@ class Triangles:
     samples: int = 0
     correlation: float = 1.0
     duration: float = 0.0
+    stretches: list[np.ndarray] = field(default_factory=list, repr=False)
+    stretch_rows: int = 0
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
@@ -75,7 +103,28 @@ class Triangles:
         """Append another block of rows of the same system (streaming)."""
         r = np.stack([stack_triangles([self.r[d], other.r[d]]) for d in range(3)])
         return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples,
-                         self.correlation, self.duration + other.duration)
+                         self.correlation, self.duration + other.duration,
+                         self._joined_stretches(other), self.stretch_rows or other.stretch_rows)
+
+    def _joined_stretches(self, other: Triangles) -> list[np.ndarray]:
+        """The stretches of ``other`` (the rows after this block's) after this block's: when
+        this block ends inside a stretch, the other's first stretch completes it."""
+        if not self.stretches or not other.stretches:
+            return self.stretches + other.stretches
+        if self.stretch_rows and self.rows % self.stretch_rows:
+            last, first = self.stretches[-1].copy(), other.stretches[0]
+            last[-1] += first[0]
+            rest = [first[1:]] if len(first) > 1 else []
+            return self.stretches[:-1] + [last] + rest + other.stretches[1:]
+        return self.stretches + other.stretches
+
+    def weighted_stretches(self, w_rot: float) -> np.ndarray:
+        """(K, p+1, p+1): each stretch's [A b]ᵀ[A b] with the θ rows scaled by ``w_rot``."""
+        if not self.stretches:
+            p1 = self.r.shape[-1]
+            return np.zeros((0, p1, p1))
+        st = np.concatenate(self.stretches)
+        return st[:, 0] + w_rot**2 * st[:, 1]
 
     def torque_free(self) -> bool:
         """Whether the rows move the platform (A ≠ 0) with no torque at all (b = 0): the motor
@@ -124,8 +173,14 @@ class Solution:
     """A least-squares fit and how well the data determine it.
 
     values : (p,) parameter values (fixed ones included, as given)
-    std : (p,) standard deviations σ̂ √(c diag((AᵀA)⁻¹)) of the weighted system, c the rows'
-        ``correlation`` (:class:`Triangles`); NaN when fixed or determined only in combination
+    std : (p,) calibrated standard deviations: the larger of the delete-one-stretch jackknife's
+        (:func:`jackknife_covariance`; it sees residuals correlated over seconds and slowly
+        varying model and discretisation error) and ``std_white``; NaN when fixed or not
+        identifiable
+    std_white : (p,) the white-noise standard deviations σ̂ √(c diag((AᵀA)⁻¹)) of the weighted
+        system, c the rows' ``correlation`` (:class:`Triangles`): right only when sensor noise
+        dominates the residual (kept for comparison)
+    std_basis : what ``std`` is, in words (for the parameter file and the report)
     singular_values : of the column-scaled free regressor (descending)
     rank : numerical rank of the column-scaled free regressor
     condition_number : σ_max/σ_min of the column-scaled free regressor; when it is rank
@@ -148,6 +203,22 @@ class Solution:
     sigma2: float
     rows: int
     covariance: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0)))
+    std_white: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    std_basis: str = "white noise"
+    at_bound: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, dtype=bool))
+    note: str = ""  # e.g. a bounded fit of a rank-deficient system chose one point of a set
+
+    def combination_of(self, m: np.ndarray) -> np.ndarray:
+        """``m`` (p,) moved along the null space to where the solution's dependent parameters
+        (those set to 0) are 0: the identifiable combinations of ``m`` in the solution's terms,
+        e.g. a truth to compare the values with."""
+        m = np.asarray(m, float)
+        if not self.null_space.shape[1]:
+            return m.copy()
+        dep = np.flatnonzero(self.combination & ~np.isfinite(self.std)
+                             & ~np.isin(self.names, list(self.fixed)))
+        c = np.linalg.lstsq(self.null_space[dep], -m[dep], rcond=None)[0]
+        return m + self.null_space @ c
 
     def null_space_text(self, tol: float = 1e-3) -> list[str]:
         """Each null-space vector as 'a·name + b·name …' (largest coefficient 1)."""
@@ -158,6 +229,29 @@ class Solution:
                      if abs(c) > tol]
             out.append(" ".join(terms).lstrip("+"))
         return out
+
+
+def jackknife_covariance(stretches: np.ndarray, idx: np.ndarray, values: np.ndarray,
+                         scale: np.ndarray) -> np.ndarray:
+    """Delete-one-stretch jackknife covariance of the parameters ``idx`` of the least-squares
+    solution ``values`` (p,), from the stretches' normal-equation pieces G_k = [A_k b_k]ᵀ[A_k
+    b_k] ((K, p+1, p+1), weighted; :class:`Triangles`): leaving stretch k out moves the
+    solution by d_k = (H − H_k)⁻¹ g_k, with H = Σ H_k the normal matrix of ``idx`` and
+    g_k = A_kᵀ(A_k m − b_k) the stretch's score at the solution; cov = (K−1)/K Σ (d_k − d̄)
+    (d_k − d̄)ᵀ. Residuals correlated within a stretch (the rows' LOESS, slowly varying model
+    and discretisation error) enter through the scores, and each stretch's own leverage through
+    (H − H_k)⁻¹. ``scale``: column scales of ``idx`` (for the conditioning of the solves)."""
+    z = np.append(values, -1.0)
+    hk = stretches[:, idx][:, :, idx] / np.outer(scale, scale)
+    g = (stretches[:, idx, :] @ z) / scale
+    h = hk.sum(axis=0)
+    try:
+        d = np.linalg.solve(h[None] - hk, g[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a stretch alone excites a parameter
+        d = (np.linalg.pinv(h[None] - hk, rcond=1e-12) @ g[..., None])[..., 0]
+    k = len(d)
+    dev = (d - d.mean(axis=0)) / scale
+    return (k - 1) / k * dev.T @ dev
 
 
 def check_rcond(rcond: float) -> None:
@@ -178,14 +272,18 @@ def check_fixed(fixed: Mapping[str, float], names: Sequence[str]) -> None:
 def solve(r: np.ndarray, rows: int, names: Sequence[str],
           fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
           bounds: tuple[np.ndarray, np.ndarray] | None = None,
-          correlation: float = 1.0) -> Solution:
+          correlation: float = 1.0, stretches: np.ndarray | None = None) -> Solution:
     """Solve min ‖A m − b‖ from the triangle ``r`` of [A | b] (weighted, stacked).
 
     Parameters
     ----------
     r : (p+1, p+1) triangle; ``rows`` : number of rows it summarises (for σ̂²)
-    correlation : rows per independent row (:attr:`Triangles.correlation`): the covariance of
-        the values is σ̂² (AᵀA)⁻¹ times it
+    correlation : rows per independent row (:attr:`Triangles.correlation`): the white-noise
+        covariance of the values is σ̂² (AᵀA)⁻¹ times it
+    stretches : (K, p+1, p+1) the weighted stretches of all logs
+        (:meth:`Triangles.weighted_stretches`): with at least :data:`MIN_STRETCHES` the
+        standard deviations are the larger of the jackknife's (:func:`jackknife_covariance`)
+        and the white-noise ones
     fixed : name → value held fixed (moved to the right-hand side)
     rcond : singular values of the column-scaled regressor below ``rcond·σ_max`` count as zero;
         those directions are reported in the null space and their dependent parameters are
@@ -265,6 +363,23 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     idx = [free[j] for j in cols]
     values[idx] = y / scale[cols]
     cov_b = cov_s / np.outer(scale[cols], scale[cols])
+    std_white = std.copy()
+    std_white[idx] = np.sqrt(np.diag(cov_b))
+    basis = (f"white noise: σ̂ √(c diag((AᵀA)⁻¹)), c = {correlation:.3g} rows per independent "
+             "row")
+    if stretches is not None and len(stretches) >= MIN_STRETCHES:
+        y_full = values.copy()
+        y_full[idx] = y / scale[cols]
+        jack = jackknife_covariance(stretches, np.asarray(idx), y_full, scale[cols])
+        # the larger of the two per parameter, correlations from the jackknife
+        sd = np.sqrt(np.maximum(np.diag(jack), np.diag(cov_b)))
+        jd = np.sqrt(np.diag(jack))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(jd > 0, sd / jd, 0.0)
+        cov_b = np.where(np.outer(jd, jd) > 0, jack * np.outer(ratio, ratio), cov_b)
+        basis = (f"jackknife over {len(stretches)} stretches of {STRETCH_S:g} s (residuals "
+                 "correlated in time and slowly varying model error), at least the white-noise "
+                 "σ")
     std[idx] = np.sqrt(np.diag(cov_b))
     cov[np.ix_(idx, idx)] = cov_b
 
@@ -283,5 +398,5 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     # of the identifiable part: σ_max over the smallest singular value kept
     cond = float(sv[0] / sv[rank - 1])
     return Solution(names, values, std, sv, rank, cond, null, combination, combinations, fixed,
-                    sigma2, rows, cov)
+                    sigma2, rows, cov, std_white, basis)
 

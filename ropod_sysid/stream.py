@@ -296,7 +296,8 @@ class _Blocks:
         if self.gather is not None:
             rows = first + self.grid.step * np.arange(count)
             self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows])
-        block = block_triangles(a, b, self.source)
+        block = block_triangles(a, b, self.source, (pa + first - self.trim) // self.grid.step,
+                                self.grid.stretch_rows(self.dt))
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
