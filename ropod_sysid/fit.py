@@ -115,29 +115,33 @@ class FitResult:
     def samples(self) -> int:
         return sum(lf.samples for lf in self.logs)
 
+    @property
+    def shown(self) -> Solution:
+        """The solution the fit reports: the physically consistent one if made."""
+        return self.physical if self.physical is not None else self.solution
+
     def values(self) -> dict[str, float]:
-        sol = self.physical or self.solution
+        sol = self.shown
         return dict(zip(sol.names, map(float, sol.values), strict=True))
 
     def fitted_parameters(self) -> DynamicParameters:
         """The values the fit reports (the physically consistent ones if made) as a model's
         parameters, e.g. to validate them on other logs."""
-        shown = self.physical.values if self.physical is not None else self.solution.values
-        return DynamicParameters.from_vector(shown, self.solution.names)
+        return DynamicParameters.from_vector(self.shown.values, self.solution.names)
 
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (``docs/file-formats.md``), with the fit's account in
         extras."""
         sol = self.solution
-        values = self.physical.values if self.physical is not None else sol.values
+        shown = self.shown
         params: dict[str, dict[str, object]] = {}
         for j, name in enumerate(sol.names):
-            std = sol.std[j]
-            entry: dict[str, object] = {"value": float(values[j]),
+            std = shown.std[j]
+            entry: dict[str, object] = {"value": float(shown.values[j]),
                                         "std": None if not np.isfinite(std) else float(std)}
-            if sol.combination[j]:
+            if shown.combination[j]:
                 entry["combination"] = True
-                entry["meaning"] = sol.combinations.get(name, "")
+                entry["meaning"] = shown.combinations.get(name, "")
             if name in sol.fixed:
                 entry["fixed"] = True
             params[name] = entry
@@ -149,6 +153,9 @@ class FitResult:
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
             **({"split_gaps": True} if self.options.split_gaps else {}),
+            "std_basis": shown.std_basis,
+            "std_white_noise": {n: None if not np.isfinite(v) else float(v)
+                                for n, v in zip(sol.names, shown.std_white, strict=True)},
             "logs": [{"file": lf.source, "samples": lf.samples, "rows": lf.triangles.rows,
                       "rms": {"translation": lf.rms["translation"],
                               "rotation": lf.rms["rotation"]}} for lf in self.logs],
@@ -160,6 +167,10 @@ class FitResult:
         if self.physical is not None:
             extras["physical"] = True
             extras["rms_free_fit"] = dict(self.rms)
+            extras["at_bound"] = {n: float(v) for n, v, a in zip(
+                sol.names, shown.values, shown.at_bound, strict=True) if a}
+            if shown.note:
+                extras["physical_note"] = shown.note
         return ParameterFile(self.platform.name, params,  # type: ignore[arg-type]
                              {"translation": rms["translation"], "rotation": rms["rotation"]},
                              sol.condition_number, sol.rank, self.samples, extras)
@@ -399,6 +410,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
         r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
         result.physical = solve(r, 3 * sum(s.rows for s in systems), names, options.fix,
                                 options.rcond, bounds=physical_bounds(names),
-                                correlation=mean_correlation(systems))
+                                correlation=mean_correlation(systems),
+                                stretches=weighted_stretches(systems, weights))
         result.physical_rms = combined_rms(systems, result.physical.values)
     return result

@@ -14,7 +14,7 @@ triangles after the fact.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
@@ -288,13 +288,16 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     rcond : singular values of the column-scaled regressor below ``rcond·σ_max`` count as zero;
         those directions are reported in the null space and their dependent parameters are
         set to zero, the independent ones then stand for identifiable combinations.
-    bounds : (lower, upper) arrays over all parameters for a bounded (physical) fit.
+    bounds : (lower, upper) arrays over all parameters for a bounded (physical) fit
+        (:func:`_bounded`).
     """
     names = list(names)
     p = len(names)
     fixed = dict(fixed or {})
     check_rcond(rcond)
     check_fixed(fixed, names)
+    if bounds is not None:
+        return _bounded(r, rows, names, fixed, rcond, bounds, correlation, stretches)
     fix_idx = [names.index(k) for k in fixed]
     free = [j for j in range(p) if j not in fix_idx]
     m_fix = np.array([fixed[names[j]] for j in fix_idx])
@@ -383,14 +386,6 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     std[idx] = np.sqrt(np.diag(cov_b))
     cov[np.ix_(idx, idx)] = cov_b
 
-    if bounds is not None:
-        lo, hi = (np.asarray(v, float) for v in bounds)
-        from scipy.optimize import lsq_linear  # imported here: only bounded fits need it
-
-        res = lsq_linear(cs, d, bounds=(lo[free] * scale, hi[free] * scale),
-                                        method="bvls", lsmr_tol="auto")
-        values[free] = res.x / scale
-
     if not np.any(values[free]):
         raise IdentifiabilityError(
             "the solution is all zeros: nothing in the logs' torques needs the parameters "
@@ -400,3 +395,91 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     return Solution(names, values, std, sv, rank, cond, null, combination, combinations, fixed,
                     sigma2, rows, cov, std_white, basis)
 
+
+
+def _bounded(r: np.ndarray, rows: int, names: list[str], fixed: dict[str, float],
+             rcond: float, bounds: tuple[np.ndarray, np.ndarray], correlation: float,
+             stretches: np.ndarray | None) -> Solution:
+    """The bounded least-squares solution (BVLS) with its own account: the parameters it leaves
+    at a bound are held there (:attr:`Solution.at_bound`), and the free fit of the others at
+    that point — whose values are the bounded ones (the optimality conditions of a bounded
+    least-squares problem) — gives their σ, rank and combinations. When that fit is still rank
+    deficient the bounded solution is one point of a set of equally good ones: the parameters
+    of the combinations get no σ of their own, their ``combinations`` text gives the
+    identifiable combination with its value and σ, and :attr:`Solution.note` says so."""
+    from scipy.optimize import lsq_linear  # imported here: only bounded fits need it
+
+    p = len(names)
+    lo, hi = (np.asarray(v, float) for v in bounds)
+    fix_idx = [names.index(k) for k in fixed]
+    free = np.array([j for j in range(p) if j not in fix_idx], dtype=int)
+    m_fix = np.array([fixed[names[j]] for j in fix_idx])
+    c = r[:, free]
+    d = r[:, -1] - (r[:, fix_idx] @ m_fix if fix_idx else 0.0)
+    norms = np.linalg.norm(c, axis=0)
+    if not free.size or not np.any(norms > 0):
+        raise IdentifiabilityError(
+            "the regressor has rank 0: the logs do not excite any parameter; use logs in which "
+            "the platform moves")
+    scale = np.where(norms > 0, norms, 1.0)
+    lo_s, hi_s = lo[free] * scale, hi[free] * scale
+    x = lsq_linear(c / scale, d, bounds=(lo_s, hi_s), method="bvls", lsmr_tol="auto").x
+    tol = 1e-9 * (1.0 + np.abs(x).max())
+    at = (np.isfinite(lo_s) & (x - lo_s <= tol)) | (np.isfinite(hi_s) & (hi_s - x <= tol))
+    x = np.where(at & (x - lo_s <= tol), lo_s, np.where(at, hi_s, x))
+    values = np.zeros(p)
+    values[fix_idx] = m_fix
+    values[free] = x / scale
+    if not np.any(values[free]):
+        raise IdentifiabilityError(
+            "the solution is all zeros: nothing in the logs' torques needs the parameters "
+            "(are the motor currents all zero?); check the current columns of the logs")
+    at_bound = np.zeros(p, dtype=bool)
+    at_bound[free[at]] = True
+    if at.all():  # every free parameter on a bound: nothing left to fit
+        none = np.full(p, np.nan)
+        return Solution(names, values, none, np.zeros(0), 0, np.nan, np.zeros((p, 0)),
+                        np.zeros(p, dtype=bool), {}, fixed, np.nan, rows,
+                        np.full((p, p), np.nan), none.copy(), "none: every free parameter is "
+                        "at a bound", at_bound)
+    held = {**fixed, **{names[j]: float(values[j]) for j in free[at]}}
+    inner = solve(r, rows, names, held, rcond, correlation=correlation, stretches=stretches)
+    std, white = inner.std.copy(), inner.std_white.copy()
+    combination = inner.combination.copy()
+    combinations = dict(inner.combinations)
+    note = ""
+    unbounded = solve(r, rows, names, fixed, rcond, correlation=correlation,
+                      stretches=stretches)
+    lower = np.zeros(p, dtype=bool)
+    lower[free[at & (x == lo_s)]] = True
+    if _slides(unbounded.null_space, lower, at_bound & ~lower):
+        tied = np.flatnonzero(np.any(unbounded.null_space != 0, axis=1))
+        note = ("the bounded fit chose one point of a set of equally good solutions: these "
+                f"logs cannot separate {', '.join(names[j] for j in tied)}; hold one of them "
+                "with --fix NAME=VALUE to choose the point")
+        comb = unbounded.combination_of(values)
+        for j in tied:
+            name = names[j]
+            sd = inner.std[j] if np.isfinite(inner.std[j]) else unbounded.std[j]
+            if np.isfinite(unbounded.std[j]):
+                combinations[name] = (f"one point of a set; identifiable: "
+                                      f"{unbounded.combinations.get(name, name)} = "
+                                      f"{comb[j]:.5g} ± {sd:.2g}")
+            else:
+                combinations[name] = ("one point of a set; not identifiable alone (hold it "
+                                      f"with --fix {name}=VALUE)")
+            std[j] = white[j] = np.nan
+            combination[j] = True
+    return replace(inner, values=values, std=std, std_white=white, combination=combination,
+                   combinations=combinations, fixed=fixed, at_bound=at_bound, note=note)
+
+
+def _slides(null: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> bool:
+    """Whether a point can move along a null-space direction (p, k) without leaving the
+    bounds it is on (``lower``, ``upper`` masks): then it is one point of a set of equally good
+    bounded solutions."""
+    for v in null.T:
+        for d in (v, -v):
+            if np.all(d[lower] >= 0) and np.all(d[upper] <= 0):
+                return True
+    return False

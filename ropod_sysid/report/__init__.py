@@ -58,7 +58,13 @@ from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
 from ropod_sysid.solve import combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
-from ropod_sysid.summary import difference, identifiability_verdict, implausible, relative_std
+from ropod_sysid.summary import (
+    difference,
+    identifiability_verdict,
+    implausible,
+    model_error_ratio,
+    relative_std,
+)
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
 
 __all__ = ["read_comparison", "render_fit_report", "result_from_parameter_file",
@@ -255,7 +261,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
                     compare: ParameterFile | None) -> tuple[list[dict[str, Any]], list[str]]:
-    sol = result.solution
+    sol = result.shown
     rel = relative_std(result)
     other = compare.values() if compare is not None else {}
     other_std = compare.stds() if compare is not None else {}
@@ -267,6 +273,10 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
         flags = []
         if name in sol.fixed:
             flags.append(("fixed", "fixed", "held fixed in the fit"))
+        if sol.at_bound.size and sol.at_bound[j]:
+            flags.append(("at-bound", "at bound",
+                          f"on its physical bound ({value:g}) in the bounded fit: held there, "
+                          "so it has no σ"))
         if sol.combination[j]:
             flags.append(("combination", "combination",
                           sol.combinations.get(name, "determined only in combination")))
@@ -355,6 +365,9 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "logs": log_views,
         "samples": int(sum(v["samples"] for v in log_views)),
         "correlation": mean_correlation([lf.triangles for lf in result.logs]),
+        "std_basis": result.shown.std_basis,
+        "model_error_ratio": model_error_ratio(result),
+        "physical_note": result.shown.note,
         "span": str(result.options.span),
         "friction": result.options.friction,
         "rms": rms,
