@@ -12,7 +12,6 @@ from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
 from ropod_sysid.validate import LogValidation
 
-
 MODEL_ERROR_RATIO = 2.0  # calibrated σ / white-noise σ above which model error dominates
 
 
