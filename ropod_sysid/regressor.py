@@ -186,19 +186,58 @@ class Span:
 
 
 def check_input_delay(delay: float, span_seconds: float | None = None) -> None:
-    """An input delay [s] is finite, ≥ 0 (the logged torques are only shifted later in time:
-    the motion lags the torque) and at most one smoother span ``span_seconds`` (a longer lag
-    is no transport delay; it pairs torques with unrelated motion)."""
+    """An input delay [s] is finite and at most one smoother span ``span_seconds`` either way
+    (a longer lag is no transport delay; it pairs torques with unrelated motion). Positive: the
+    motion lags the logged torque (the torques are shifted later); negative: the motion leads
+    it (the drive logs its torque late)."""
     if not math.isfinite(delay):
-        raise InputError(f"--input-delay {delay:g}: must be a finite number of seconds ≥ 0, "
-                         "e.g. 0.0025, or auto")
-    if delay < 0:
-        raise InputError(f"--input-delay {delay:g}: negative delays (motion ahead of the "
-                         "logged torque) are not supported; give a delay ≥ 0 s or auto")
-    if span_seconds is not None and delay > span_seconds:
+        raise InputError(f"--input-delay {delay:g}: must be a finite number of seconds, e.g. "
+                         "0.0025 (negative: the motion leads the logged torque), or auto")
+    if span_seconds is not None and abs(delay) > span_seconds:
+        either = " either way" if delay < 0 else ""
         raise InputError(f"--input-delay {delay:g}: longer than the smoother span "
-                         f"({span_seconds:.3g} s); give at most {span_seconds:.3g} s, auto, "
-                         "or a longer --span")
+                         f"({span_seconds:.3g} s); give at most {span_seconds:.3g} s{either}, "
+                         "auto, or a longer --span")
+
+
+MAX_DELAY_NODES = 9  # node delays of --input-delay auto's single pass (at most)
+
+
+@dataclass(frozen=True)
+class DelayBracket:
+    """``--input-delay auto``: the delays in [−top, top] [s] are searched from one pass that
+    forms b_ID for a few node delays. b_ID = B_τ τ (eq. 35) is linear in the torques, and so are
+    the rows' torque average and LOESS, so the b_ID of a delay between two nodes one sample
+    apart is exactly their linear interpolation (that of :func:`delayed`);
+    :meth:`ropod_sysid.solve.Triangles.at_delay` forms the triangles of any delay from the
+    node columns. Nodes are every sample while at most :data:`MAX_DELAY_NODES` cover the
+    bracket, else every few samples, interpolated by cubics (approximate)."""
+
+    top: float
+
+    def _step(self, dt: float) -> tuple[int, int]:
+        n = max(1, math.ceil(self.top / dt - 1e-9))
+        h = max(1, math.ceil(2 * n / (MAX_DELAY_NODES - 1)))
+        return h, math.ceil(n / h)
+
+    def nodes(self, dt: float) -> np.ndarray:
+        """The node delays [s] for sample time ``dt``: whole samples, covering ±``top``."""
+        h, j = self._step(dt)
+        return dt * h * np.arange(-j, j + 1)
+
+    def order(self, dt: float) -> int:
+        """Interpolation order between the nodes (:func:`ropod_sysid.solve.node_weights`):
+        1 (exact) for nodes a sample apart, else 3."""
+        return 1 if self._step(dt)[0] == 1 else 3
+
+
+def delay_reach(delay: float | np.ndarray, dt: float) -> tuple[int, int]:
+    """Samples before and after a torque sample that its delayed value reaches (positive and
+    negative delays, with two samples to spare)."""
+    d = np.atleast_1d(np.asarray(delay, float))
+    back = math.ceil(max(float(d.max()), 0.0) / dt) + 2 if d.max() > 0 else 0
+    ahead = math.ceil(max(-float(d.min()), 0.0) / dt) + 2 if d.min() < 0 else 0
+    return back, ahead
 
 
 @dataclass(frozen=True)
@@ -276,6 +315,8 @@ class Preprocessed:
     notes: list[str] = field(default_factory=list)
     trim: int = 0  # samples dropped at each end after filtering the equations
     grid: RowGrid = field(default_factory=lambda: RowGrid(1, 3))
+    delays: np.ndarray | None = None  # node delays of tau (M, A, n) (DelayBracket), or None
+    delay_order: int = 1  # their interpolation order (DelayBracket.order)
 
     def window(self, start: int, stop: int) -> Preprocessed:
         """Samples start:stop (untrimmed indices) as a new block."""
@@ -286,7 +327,8 @@ class Preprocessed:
         i = index
         return Preprocessed(self.t[i], self.q[i], self.qd[i], self.qdd[i], self.angles[i],
                             self.angle_rates[i], self.tau[i], self.source,
-                            self.span_samples, self.dt, self.notes, 0, self.grid)
+                            self.span_samples, self.dt, self.notes, 0, self.grid, self.delays,
+                            self.delay_order)
 
     def row_samples(self) -> np.ndarray:
         """Indices of the samples that become equation rows (after trimming)."""
@@ -298,13 +340,26 @@ class Preprocessed:
         return len(range(self.trim, len(self.t) - self.trim, self.grid.step))
 
 
-def delayed(t: np.ndarray, tau: np.ndarray, input_delay: float) -> np.ndarray:
+def delayed(t: np.ndarray, tau: np.ndarray, input_delay: float | np.ndarray) -> np.ndarray:
     """Torques (N, A) shifted later by ``input_delay`` [s]: the torque logged at t acts on the
-    motion at t + delay (linear interpolation, held at the first sample)."""
+    motion at t + delay (linear interpolation, held at the first and last sample). Several
+    delays (n,) give (N, A, n)."""
+    if np.ndim(input_delay):
+        return shifted(tau, np.asarray(input_delay) / float(np.median(np.diff(t))))
     if not input_delay:
         return tau
     return np.stack([np.interp(t - input_delay, t, tau[:, j]) for j in range(tau.shape[1])],
                     axis=1)
+
+
+def shifted(tau: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Torques (N, A) on a uniform grid shifted later by whole numbers of samples ``shifts``
+    (n,), held at the first and last sample: (N, A, n) (:class:`DelayBracket`'s nodes; equal
+    to :func:`delayed` of those delays)."""
+    n = len(tau)
+    js = np.rint(np.asarray(shifts, float)).astype(int)
+    idx = np.clip(np.arange(n)[:, None] - js[None, :], 0, n - 1)  # (N, n)
+    return np.moveaxis(tau[idx], 1, 2)
 
 
 def tracker_pose(pose: np.ndarray) -> np.ndarray:
@@ -329,11 +384,13 @@ def derivatives(model: PlatformModel, angles_s: np.ndarray, pose_s: np.ndarray |
 
 
 def preprocess(log: Log, platform: Platform, span: Span | None = None,
-               input_delay: float = 0.0, row_step: int | None = None) -> Preprocessed:
+               input_delay: float | DelayBracket = 0.0, row_step: int | None = None,
+               ) -> Preprocessed:
     """Smooth, differentiate and trim one log (Sec. VI-B).
 
     ``input_delay`` [s] shifts the torques: the torque logged at t acts on the motion at
-    t + delay. ``row_step``: samples between equation rows (:class:`RowGrid`; None: about ten
+    t + delay; a :class:`DelayBracket` gives the torques at its node delays. ``row_step``:
+    samples between equation rows (:class:`RowGrid`; None: about ten
     per smoother span).
     """
     span = span or Span.parse(None)
@@ -356,22 +413,29 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
         t = t_new
     n = len(t)
     k = span.samples(dt, n)
-    check_input_delay(input_delay, k * dt)
+    nodes = input_delay.nodes(dt) if isinstance(input_delay, DelayBracket) else None
+    if nodes is None:
+        check_input_delay(float(input_delay), k * dt)  # type: ignore[arg-type]
     grid = RowGrid.for_span(k, row_step)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
     check_length(log.source, n, k, dt, trim)
     angles_s = signals.loess(angles, k)
     pose_s = None if pose is None else signals.loess(tracker_pose(pose), k)
     q, qd, qdd, rates, _ = derivatives(model, angles_s, pose_s, dt)
-    tau = delayed(t, platform.torque_constants() * current, input_delay)
+    tau = delayed(t, platform.torque_constants() * current,
+                  nodes if nodes is not None else input_delay)  # type: ignore[arg-type]
     return Preprocessed(t, q, qd, qdd, angles_s, rates, tau, log.source, k, dt, notes, trim,
-                        grid)
+                        grid, nodes, input_delay.order(dt) if nodes is not None else 1)  # type: ignore[union-attr]
 
 
 def raw_system(model: PlatformModel, pre: Preprocessed,
                friction: Friction = "per-wheel") -> tuple[np.ndarray, np.ndarray]:
-    """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66)."""
+    """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66);
+    b_ID (M, 3, n) for torques at n node delays (:class:`DelayBracket`)."""
     st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
+    if pre.tau.ndim == 3:  # b_ID = B_τ τ (eq. 35) per node delay
+        return model.a_id_ext(st, pre.qdd, friction), np.einsum("nca,nak->nck", st.b_tau,
+                                                                pre.tau)
     return model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
 
 
@@ -435,16 +499,18 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: in
     (:func:`ropod_sysid.solve.stretch_grams`; the block's first row is the log's row
     ``first_row``)."""
     m, _, p = a.shape
+    b = b.reshape(m, 3, -1)  # (m, 3, n): b_ID at n node delays (DelayBracket)
+    w = p + b.shape[2]
     full = m // QR_LEAF_ROWS * QR_LEAF_ROWS
-    r = np.empty((3, p + 1, p + 1))
-    rows = np.empty((m, p + 1))
+    r = np.empty((3, w, w))
+    rows = np.empty((m, w))
     for d in range(3):
         rows[:, :p] = a[:, d, :]
-        rows[:, p] = b[:, d]
+        rows[:, p:] = b[:, d]
         parts = []
         if full:
-            leaves = np.linalg.qr(rows[:full].reshape(-1, QR_LEAF_ROWS, p + 1), mode="r")
-            parts.append(leaves.reshape(-1, p + 1))
+            leaves = np.linalg.qr(rows[:full].reshape(-1, QR_LEAF_ROWS, w), mode="r")
+            parts.append(leaves.reshape(-1, w))
         if m > full:
             parts.append(rows[full:])
         r[d] = qr_triangle(np.vstack(parts))
@@ -466,4 +532,5 @@ def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per
     tri.samples = len(pre.t) - 2 * pre.trim
     tri.duration = (len(pre.t) - 1) * pre.dt
     tri.correlation = pre.grid.correlation
+    tri.delays, tri.delay_order = pre.delays, pre.delay_order
     return tri

@@ -43,6 +43,27 @@ def qr_triangle(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
+def node_weights(nodes: np.ndarray, delay: float, order: int = 1) -> np.ndarray:
+    """(n,) weights of the node delays' b_ID columns that give ``delay``'s
+    (:meth:`Triangles.at_delay`): ``order`` 1, linear interpolation between the two nearest
+    nodes (exact for nodes one sample apart); 3, the cubic through the four nearest (nodes
+    several samples apart)."""
+    n = len(nodes)
+    delay = float(np.clip(delay, nodes[0], nodes[-1]))
+    k = int(np.clip(np.searchsorted(nodes, delay) - 1, 0, n - 2))
+    w = np.zeros(n)
+    if order == 1 or n < 4:
+        f = (delay - nodes[k]) / (nodes[k + 1] - nodes[k])
+        w[k], w[k + 1] = 1.0 - f, f
+        return w
+    k0 = int(np.clip(k - 1, 0, n - 4))
+    x = nodes[k0: k0 + 4]
+    diff = x[:, None] - x[None, :] + np.eye(4)  # Lagrange: Π_{j≠i} (d − x_j) / (x_i − x_j)
+    num = np.where(np.eye(4, dtype=bool), 1.0, delay - x[None, :])
+    w[k0: k0 + 4] = np.prod(num / diff, axis=1)
+    return w
+
+
 def stretch_grams(a: np.ndarray, b: np.ndarray, first_row: int, stretch_rows: int,
                   ) -> np.ndarray:
     """(K, 2, p+1, p+1): [A b]ᵀ[A b] of the x and y rows together and of the θ rows of A
@@ -50,12 +71,14 @@ def stretch_grams(a: np.ndarray, b: np.ndarray, first_row: int, stretch_rows: in
     the block's first row being row ``first_row`` (the first and last stretch of the block may
     be partial; :meth:`Triangles.merge` joins them with the neighbouring blocks')."""
     m, _, p = a.shape
+    b = b.reshape(m, 3, -1)  # (m, 3, n): b at n node delays (Triangles.delays)
+    w = p + b.shape[2]
     cuts = np.arange(stretch_rows - first_row % stretch_rows, m, stretch_rows)
     edges = np.concatenate([[0], cuts, [m]])
-    out = np.empty((len(edges) - 1, 2, p + 1, p + 1))
+    out = np.empty((len(edges) - 1, 2, w, w))
     for i, (s, e) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
-        ab = np.concatenate([a[s:e], b[s:e, :, None]], axis=2)
-        xy = ab[:, :2].reshape(-1, p + 1)
+        ab = np.concatenate([a[s:e], b[s:e]], axis=2)
+        xy = ab[:, :2].reshape(-1, w)
         out[i, 0] = xy.T @ xy
         out[i, 1] = ab[:, 2].T @ ab[:, 2]
     return out
@@ -82,6 +105,9 @@ class Triangles:
         (K, 2, p+1, p+1) arrays, in row order. O(duration) small matrices, from which the
         jackknife σ (:func:`jackknife_covariance`) is formed after the solve, without a second
         pass over the logs.
+    delays : None, or the node delays [s] (n,) whose b_ID columns the triangles hold in place
+        of one ((3, p+n, p+n); ``--input-delay auto``): :meth:`at_delay` gives the triangles of
+        any delay between them, interpolating with ``delay_order`` (:func:`node_weights`).
     """
 
     r: np.ndarray
@@ -92,6 +118,8 @@ class Triangles:
     duration: float = 0.0
     stretches: list[np.ndarray] = field(default_factory=list, repr=False)
     stretch_rows: int = 0
+    delays: np.ndarray | None = field(default=None, repr=False)
+    delay_order: int = 1
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
@@ -104,7 +132,25 @@ class Triangles:
         r = np.stack([stack_triangles([self.r[d], other.r[d]]) for d in range(3)])
         return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples,
                          self.correlation, self.duration + other.duration,
-                         self._joined_stretches(other), self.stretch_rows or other.stretch_rows)
+                         self._joined_stretches(other), self.stretch_rows or other.stretch_rows,
+                         self.delays)
+
+    def at_delay(self, delay: float, stretches: bool = True) -> Triangles:
+        """The triangles of one delay [s] from those of the node delays (:attr:`delays`): b_ID
+        of a delay is the linear interpolation of the two nearest nodes' columns (exact for
+        nodes a sample apart: :class:`ropod_sysid.regressor.DelayBracket`), and [A | b_d] =
+        [A | B] T, T = diag(I, w), so its triangle is that of R T and its stretches Tᵀ G T.
+        ``stretches=False`` leaves them out (a cheap cost function)."""
+        assert self.delays is not None
+        n = len(self.delays)
+        p = self.r.shape[-1] - n
+        t = np.zeros((p + n, p + 1))
+        t[:p, :p] = np.eye(p)
+        t[p:, p] = node_weights(self.delays, delay, self.delay_order)
+        r = np.stack([qr_triangle(rd @ t) for rd in self.r])
+        st = [t.T @ s @ t for s in self.stretches] if stretches else []
+        return Triangles(r, self.rows, self.label, self.samples, self.correlation,
+                         self.duration, st, self.stretch_rows)
 
     def _joined_stretches(self, other: Triangles) -> list[np.ndarray]:
         """The stretches of ``other`` (the rows after this block's) after this block's: when
