@@ -186,3 +186,17 @@ def test_negative_delays_and_the_bracket_stream_like_in_memory(off_square, runs_
         ref = triangles(model, preprocess(log, off_square, None, delay))
         got = stream_log(log, off_square, input_delay=delay, chunk=97).triangles
         assert_same_triangles(ref, got, rel=1e-10)
+
+
+def test_residual_autocorrelation_of_a_sinusoid_and_of_white_noise():
+    """The report's autocorrelation: cos(2π lag / T) for a sinusoid, ~0 beyond lag 0 for
+    white noise."""
+    from ropod_sysid.report.figures import autocorrelation
+
+    t = np.arange(4000) * 0.01
+    sine = np.sin(2 * np.pi * t / 2.0)
+    white = np.random.default_rng(0).normal(size=t.size)
+    lags, acf = autocorrelation(t, np.column_stack([sine, white, sine]), 1.0)
+    assert lags[1] == pytest.approx(0.01) and lags[-1] == pytest.approx(1.0)
+    np.testing.assert_allclose(acf[:, 0], np.cos(2 * np.pi * lags / 2.0), atol=0.01)
+    assert acf[0, 1] == 1.0 and np.abs(acf[1:, 1]).max() < 0.06

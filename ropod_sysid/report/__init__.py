@@ -56,7 +56,7 @@ from ropod_sysid.params import (
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
-from ropod_sysid.solve import combined_rms
+from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
     difference,
@@ -209,8 +209,10 @@ def _verdict_class(text: str) -> str:
 
 
 def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
-               ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray]:
-    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs.
+               ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
+                          list[tuple[np.ndarray, np.ndarray]]]:
+    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
+    per log its kept rows' times and errors.
 
     The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
     the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
@@ -219,6 +221,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
     platform = result.platform
     opts = result.options
     views, errs, vels = [], [], []
+    series: list[tuple[np.ndarray, np.ndarray]] = []
     fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.layout)
     for k, lf in enumerate(result.logs):
         plot = lf.plot
@@ -232,6 +235,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         fit = plot.a_rows @ shown
         err = plot.b_rows - fit
         errs.append(err)
+        series.append((plot.t_rows, err))
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
         views.append({
@@ -256,7 +260,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
-    return views, all_err, all_vel
+    return views, all_err, all_vel, series
 
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
@@ -329,7 +333,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     rms = result.physical_rms if result.physical_rms is not None else result.rms
     verdict = identifiability_verdict(result)
 
-    log_views, all_err, all_vel = _log_views(result, logs, shown)
+    log_views, all_err, all_vel, series = _log_views(result, logs, shown)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
 
@@ -396,6 +400,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "combinations": [(k, v) for k, v in sol.combinations.items()],
         "hist_figure": _png_uri(figures.residual_histograms(all_err)),
         "vel_figure": _png_uri(figures.residual_vs_velocity(all_vel, all_err)),
+        "acf_figure": _png_uri(figures.residual_autocorrelation(series, STRETCH_S)),
         "validation": validation,
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
     }
