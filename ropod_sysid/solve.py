@@ -315,6 +315,33 @@ def check_fixed(fixed: Mapping[str, float], names: Sequence[str]) -> None:
             raise InputError(f"--fix {k}={v:g}: the value must be a finite number")
 
 
+def _check_nonzero(values: np.ndarray) -> None:
+    """A solution of all zeros is no fit: the torques need no parameter."""
+    if not np.any(values):
+        raise IdentifiabilityError(
+            "the solution is all zeros: nothing in the logs' torques needs the parameters "
+            "(are the motor currents all zero?); check the current columns of the logs")
+
+
+def _free_system(r: np.ndarray, names: list[str], fixed: Mapping[str, float],
+                 ) -> tuple[list[int], list[int], np.ndarray, np.ndarray, np.ndarray,
+                            np.ndarray]:
+    """The fixed and free columns of the triangle ``r``, the fixed values, the free columns,
+    the right-hand side with the fixed ones moved to it, and the free columns' scales
+    (norms; 1 for a zero column). No free column with a nonzero norm: rank 0, an error."""
+    fix_idx = [names.index(k) for k in fixed]
+    free = [j for j in range(len(names)) if j not in fix_idx]
+    m_fix = np.array([fixed[names[j]] for j in fix_idx])
+    c = r[:, free]
+    d = r[:, -1] - (r[:, fix_idx] @ m_fix if fix_idx else 0.0)
+    norms = np.linalg.norm(c, axis=0)
+    if not free or not np.any(norms > 0):
+        raise IdentifiabilityError(
+            "the regressor has rank 0: the logs do not excite any parameter; use logs in which "
+            "the platform moves")
+    return fix_idx, free, m_fix, c, d, np.where(norms > 0, norms, 1.0)
+
+
 def solve(r: np.ndarray, rows: int, names: Sequence[str],
           fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
           bounds: tuple[np.ndarray, np.ndarray] | None = None,
@@ -344,17 +371,7 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     check_fixed(fixed, names)
     if bounds is not None:
         return _bounded(r, rows, names, fixed, rcond, bounds, correlation, stretches)
-    fix_idx = [names.index(k) for k in fixed]
-    free = [j for j in range(p) if j not in fix_idx]
-    m_fix = np.array([fixed[names[j]] for j in fix_idx])
-    c = r[:, free]
-    d = r[:, -1] - (r[:, fix_idx] @ m_fix if fix_idx else 0.0)
-    norms = np.linalg.norm(c, axis=0)
-    if not free or not np.any(norms > 0):
-        raise IdentifiabilityError(
-            "the regressor has rank 0: the logs do not excite any parameter; use logs in which "
-            "the platform moves")
-    scale = np.where(norms > 0, norms, 1.0)
+    fix_idx, free, m_fix, c, d, scale = _free_system(r, names, fixed)
     cs = c / scale
     sv = np.linalg.svd(cs, compute_uv=False)
     tol = rcond * sv[0]
@@ -432,10 +449,7 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     std[idx] = np.sqrt(np.diag(cov_b))
     cov[np.ix_(idx, idx)] = cov_b
 
-    if not np.any(values[free]):
-        raise IdentifiabilityError(
-            "the solution is all zeros: nothing in the logs' torques needs the parameters "
-            "(are the motor currents all zero?); check the current columns of the logs")
+    _check_nonzero(values[free])
     # of the identifiable part: σ_max over the smallest singular value kept
     cond = float(sv[0] / sv[rank - 1])
     return Solution(names, values, std, sv, rank, cond, null, combination, combinations, fixed,
@@ -457,17 +471,8 @@ def _bounded(r: np.ndarray, rows: int, names: list[str], fixed: dict[str, float]
 
     p = len(names)
     lo, hi = (np.asarray(v, float) for v in bounds)
-    fix_idx = [names.index(k) for k in fixed]
-    free = np.array([j for j in range(p) if j not in fix_idx], dtype=int)
-    m_fix = np.array([fixed[names[j]] for j in fix_idx])
-    c = r[:, free]
-    d = r[:, -1] - (r[:, fix_idx] @ m_fix if fix_idx else 0.0)
-    norms = np.linalg.norm(c, axis=0)
-    if not free.size or not np.any(norms > 0):
-        raise IdentifiabilityError(
-            "the regressor has rank 0: the logs do not excite any parameter; use logs in which "
-            "the platform moves")
-    scale = np.where(norms > 0, norms, 1.0)
+    fix_idx, free_list, m_fix, c, d, scale = _free_system(r, names, fixed)
+    free = np.array(free_list, dtype=int)
     lo_s, hi_s = lo[free] * scale, hi[free] * scale
     x = lsq_linear(c / scale, d, bounds=(lo_s, hi_s), method="bvls", lsmr_tol="auto").x
     tol = 1e-9 * (1.0 + np.abs(x).max())
@@ -476,10 +481,7 @@ def _bounded(r: np.ndarray, rows: int, names: list[str], fixed: dict[str, float]
     values = np.zeros(p)
     values[fix_idx] = m_fix
     values[free] = x / scale
-    if not np.any(values[free]):
-        raise IdentifiabilityError(
-            "the solution is all zeros: nothing in the logs' torques needs the parameters "
-            "(are the motor currents all zero?); check the current columns of the logs")
+    _check_nonzero(values[free])
     at_bound = np.zeros(p, dtype=bool)
     at_bound[free[at]] = True
     if at.all():  # every free parameter on a bound: nothing left to fit
