@@ -16,7 +16,12 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
    central differences, the rows' halo h = :attr:`ropod_sysid.regressor.RowGrid.halo`),
    odometry continued from the pose carried from the previous block, central differences,
    the rows of A_ID,ext and b_ID on the row grid (:class:`ropod_sysid.regressor.RowGrid`)
-   and their LOESS, and the QR triangles of the block's rows merged into the log's (TSQR).
+   and their LOESS, and the QR triangles of the block's rows merged into the log's (TSQR),
+   with the normal-equation pieces of its 2 s stretches for the jackknife σ
+   (:class:`ropod_sysid.solve.Triangles`; a block ending inside a stretch leaves it to the
+   next). With ``--input-delay auto`` b_ID is formed for each node delay of the bracket
+   (:class:`ropod_sysid.regressor.DelayBracket`), the window reaching back and ahead by the
+   largest delays.
 
 Every sample's value is computed from the same neighbours by the same formula as in one pass,
 so the triangles equal the in-memory ones to rounding (the FFT convolution of long windows is
