@@ -30,7 +30,9 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 OUT = HERE / "out" / "delay"
-CLI = [sys.executable, "-m", "ropod_sysid.cli"]
+EXE = Path(sys.executable).with_name("ropod-sysid")
+CLI = [str(EXE)] if EXE.exists() else [sys.executable, "-c",
+                                        "from ropod_sysid.cli.main import main; main()"]
 
 
 def run(args: list[str]) -> float:

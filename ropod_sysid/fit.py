@@ -357,7 +357,8 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     result equals :func:`fit_logs` of the whole logs to rounding. With ``workers`` (a local
     Dask cluster of that many processes) or ``dask_address`` (an existing scheduler) each log
     is reduced on a worker and only the triangles come back. ``input_delay="auto"`` streams the
-    logs once, forming b_ID at the node delays of its bracket (:func:`_delay_search`). A log listed twice is refused
+    logs once, forming b_ID at the node delays of its bracket (:func:`_delay_search`). A log
+    listed twice is refused
     (:func:`ropod_sysid.io.check_distinct`); with ``options.split_gaps`` a log with gaps in
     time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`). With ``plots``
     the last pass also gathers what the report draws of each log (:attr:`LogFit.plot`;
