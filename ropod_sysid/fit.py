@@ -299,8 +299,13 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
                  stretches=weighted_stretches(systems, weights) if calibrate else None), weights
 
 
-def weighted_stretches(systems: Sequence[Triangles], weights: Sequence[float]) -> np.ndarray:
-    """The stretches of all logs (:meth:`Triangles.weighted_stretches`), (K, p+1, p+1)."""
+def weighted_stretches(systems: Sequence[Triangles], weights: Sequence[float],
+                       ) -> np.ndarray | None:
+    """The stretches of all logs (:meth:`Triangles.weighted_stretches`), (K, p+1, p+1); None
+    when a log with rows has none (triangles made without them): the jackknife needs every
+    row in some stretch."""
+    if any(s.rows and not s.stretches for s in systems):
+        return None
     return np.concatenate([s.weighted_stretches(w)
                            for s, w in zip(systems, weights, strict=True)])
 

@@ -200,3 +200,23 @@ def test_residual_autocorrelation_of_a_sinusoid_and_of_white_noise():
     assert lags[1] == pytest.approx(0.01) and lags[-1] == pytest.approx(1.0)
     np.testing.assert_allclose(acf[:, 0], np.cos(2 * np.pi * lags / 2.0), atol=0.01)
     assert acf[0, 1] == 1.0 and np.abs(acf[1:, 1]).max() < 0.06
+
+
+def test_without_stretches_the_std_is_the_white_noise_one(off_square, runs_off_square):
+    """Triangles made without stretches (or too few stretches) give the white-noise σ and say
+    so; the parameter file names what std is and keeps the white-noise σ apart."""
+    from ropod_sysid.fit import fit_systems
+    from ropod_sysid.solve import Triangles
+
+    fit = fit_logs([r.log for r in runs_off_square], off_square)
+    bare = [Triangles(lf.triangles.r, lf.triangles.rows, correlation=lf.triangles.correlation)
+            for lf in fit.logs]
+    sol, _ = fit_systems(bare, fit.names, FitOptions())
+    np.testing.assert_allclose(sol.std, sol.std_white, rtol=1e-12)
+    np.testing.assert_allclose(sol.std_white, fit.solution.std_white, rtol=1e-9)
+    assert sol.std_basis.startswith("white noise: σ̂ √(c diag((AᵀA)⁻¹)), c = 3.5")
+    one = fit_logs([runs_off_square[0].log], off_square).solution  # 4 stretches: enough
+    assert one.std_basis.startswith("jackknife over 4 stretches of 2 s")
+    extras = fit.parameter_file().extras
+    assert extras["std_basis"] == fit.solution.std_basis
+    assert extras["std_white_noise"]["m_b"] == pytest.approx(fit.solution.std_white[0])
