@@ -75,7 +75,7 @@ def parse_weight(text: str) -> str | float:
 
 
 def parse_delay(text: str, span: Span | None = None) -> str | float:
-    """auto, or seconds ≥ 0 and (when ``span`` is in seconds) at most one span."""
+    """auto, or seconds, (when ``span`` is in seconds) at most one span either way."""
     if text == "auto":
         return text
     try:
@@ -157,8 +157,9 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 @click.option("--physical", is_flag=True,
               help="Physically consistent fit (bounded least squares); RMS cost reported.")
 @click.option("--input-delay", default="0", show_default=True,
-              help="Lag of the motion behind the logged torque: seconds, from 0 to one "
-                   "span, or auto.")
+              help="Lag of the motion behind the logged torque: seconds, at most one span "
+                   "either way (negative: the motion leads the logged torque), or auto "
+                   "(searched within ±20 ms, at most one span).")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -34,7 +34,14 @@ from ropod_sysid.params import (
     parameter_names,
 )
 from ropod_sysid.platform import Platform
-from ropod_sysid.regressor import Span, check_input_delay, preprocess, triangles, usable_pieces
+from ropod_sysid.regressor import (
+    DelayBracket,
+    Span,
+    check_input_delay,
+    preprocess,
+    triangles,
+    usable_pieces,
+)
 from ropod_sysid.solve import (
     RCOND,
     Solution,
@@ -42,6 +49,7 @@ from ropod_sysid.solve import (
     check_fixed,
     check_rcond,
     combined_rms,
+    node_weights,
     solve,
     stack_triangles,
 )
@@ -50,6 +58,7 @@ if TYPE_CHECKING:
     from ropod_sysid.plotdata import LogPlot
 
 WeightRotation = Literal["auto", "none"] | float
+NODE_FIT = 3  # node delays the delay search fits its parabola to (parabola_vertex)
 
 
 @dataclass
@@ -63,7 +72,7 @@ class FitOptions:
     physical: bool = False
     input_delay: float | Literal["auto"] = 0.0
     rcond: float = RCOND
-    max_delay: float = 0.05
+    max_delay: float = 0.02  # --input-delay auto searches ±this (at most one span) [s]
     row_step: int | None = None  # samples between equation rows; None: ~10 per span
     split_gaps: bool = False  # fit the pieces between gaps in time as separate logs
 
@@ -116,30 +125,34 @@ class FitResult:
     def samples(self) -> int:
         return sum(lf.samples for lf in self.logs)
 
+    @property
+    def shown(self) -> Solution:
+        """The solution the fit reports: the physically consistent one if made."""
+        return self.physical if self.physical is not None else self.solution
+
     def values(self) -> dict[str, float]:
-        sol = self.physical or self.solution
+        sol = self.shown
         return dict(zip(sol.names, map(float, sol.values), strict=True))
 
     def fitted_parameters(self) -> DynamicParameters:
         """The values the fit reports (the physically consistent ones if made) as a model's
         parameters, e.g. to validate them on other logs."""
-        shown = self.physical.values if self.physical is not None else self.solution.values
-        return DynamicParameters.from_vector(shown, self.solution.names)
+        return DynamicParameters.from_vector(self.shown.values, self.solution.names)
 
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (``docs/file-formats.md``), with the fit's account in
         extras."""
         sol = self.solution
-        values = self.physical.values if self.physical is not None else sol.values
+        shown = self.shown
         params: dict[str, dict[str, object]] = {}
         for j, name in enumerate(sol.names):
-            std = sol.std[j]
-            entry: dict[str, object] = {"value": float(values[j]),
+            std = shown.std[j]
+            entry: dict[str, object] = {"value": float(shown.values[j]),
                                         "std": None if not np.isfinite(std) else float(std),
                                         "unit": UNITS_OF.get(kind_of(name), "")}
-            if sol.combination[j]:
+            if shown.combination[j]:
                 entry["combination"] = True
-                entry["meaning"] = sol.combinations.get(name, "")
+                entry["meaning"] = shown.combinations.get(name, "")
             if name in sol.fixed:
                 entry["fixed"] = True
             params[name] = entry
@@ -151,7 +164,10 @@ class FitResult:
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
             **({"split_gaps": True} if self.options.split_gaps else {}),
-            "logs": [{"file": lf.source, "samples": lf.samples, "rows": lf.triangles.rows,
+            "std_basis": shown.std_basis,
+            "std_white_noise": {n: None if not np.isfinite(v) else float(v)
+                                for n, v in zip(sol.names, shown.std_white, strict=True)},
+            "logs": [{"file": lf.source, "samples": lf.samples, "rows": lf.triangles.equations,
                       "rms": {"translation": lf.rms["translation"],
                               "rotation": lf.rms["rotation"]}} for lf in self.logs],
         }
@@ -166,6 +182,10 @@ class FitResult:
         if self.physical is not None:
             extras["physical"] = True
             extras["rms_free_fit"] = dict(self.rms)
+            extras["at_bound"] = {n: float(v) for n, v, a in zip(
+                sol.names, shown.values, shown.at_bound, strict=True) if a}
+            if shown.note:
+                extras["physical_note"] = shown.note
         return ParameterFile(self.platform.name, params,  # type: ignore[arg-type]
                              {"translation": rms["translation"], "rotation": rms["rotation"]},
                              sol.condition_number, sol.rank, self.samples, extras)
@@ -206,9 +226,9 @@ def _delay_of(pfile: ParameterFile, where: str) -> float:
     d = pfile.extras.get("input_delay_s")
     if d is None:
         return 0.0
-    if isinstance(d, bool) or not isinstance(d, int | float) or not math.isfinite(d) or d < 0:
-        raise InputError(f"{where}: key 'input_delay_s' must be a non-negative number of "
-                         f"seconds, got {d!r}")
+    if isinstance(d, bool) or not isinstance(d, int | float) or not math.isfinite(d):
+        raise InputError(f"{where}: key 'input_delay_s' must be a finite number of seconds, "
+                         f"got {d!r}")
     return float(d)
 
 
@@ -284,23 +304,38 @@ def _weights(systems: Sequence[Triangles], mode: WeightRotation) -> list[float]:
 
 
 def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: FitOptions,
-                ) -> tuple[Solution, list[float]]:
-    """Weight, stack and solve the triangles of several logs."""
+                calibrate: bool = True) -> tuple[Solution, list[float]]:
+    """Weight, stack and solve the triangles of several logs; ``calibrate``: with the
+    jackknife σ from their stretches (else the white-noise σ only, cheaper)."""
     weights = _weights(systems, options.weight_rotation)
     r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
-    rows = 3 * sum(s.rows for s in systems)
+    rows = 3 * sum(s.equations for s in systems)
     return solve(r, rows, names, options.fix, options.rcond,
-                 correlation=mean_correlation(systems)), weights
+                 correlation=mean_correlation(systems),
+                 stretches=weighted_stretches(systems, weights) if calibrate else None), weights
+
+
+def weighted_stretches(systems: Sequence[Triangles], weights: Sequence[float],
+                       ) -> np.ndarray | None:
+    """The stretches of all logs (:meth:`Triangles.weighted_stretches`), (K, p+1, p+1); None
+    when a log with rows has none (triangles made without them): the jackknife needs every
+    row in some stretch."""
+    if any(s.rows and not s.stretches for s in systems):
+        return None
+    return np.concatenate([s.weighted_stretches(w)
+                           for s, w in zip(systems, weights, strict=True)])
 
 
 def mean_correlation(systems: Sequence[Triangles]) -> float:
     """The logs' :attr:`Triangles.correlation`, weighted by their rows."""
-    rows = sum(s.rows for s in systems)
-    return sum(s.rows * s.correlation for s in systems) / rows if rows else 1.0
+    rows = sum(s.equations for s in systems)
+    return sum(s.equations * s.correlation for s in systems) / rows if rows else 1.0
 
 
-# (delay, gather the report's plot data) -> per log: source, triangles, notes, plot data
-Reduce = Callable[[float, bool], list[tuple[str, Triangles, list[str], "LogPlot | None"]]]
+# (delay or the bracket of auto, gather the report's plot data) -> per log: source,
+# triangles, notes, plot data
+Reduce = Callable[[float | DelayBracket, bool],
+                  list[tuple[str, Triangles, list[str], "LogPlot | None"]]]
 
 
 def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None = None,
@@ -319,7 +354,8 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
     if options.split_gaps:
         logs = [p for log in logs for p in usable_pieces(log, options.span, options.row_step)]
 
-    def reduce(delay: float, _plot: bool) -> list[tuple[str, Triangles, list[str], None]]:
+    def reduce(delay: float | DelayBracket, _plot: bool,
+               ) -> list[tuple[str, Triangles, list[str], None]]:
         out = []
         for log in logs:
             say(f"preprocess {log.source}")
@@ -342,7 +378,8 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     result equals :func:`fit_logs` of the whole logs to rounding. With ``workers`` (a local
     Dask cluster of that many processes) or ``dask_address`` (an existing scheduler) each log
     is reduced on a worker and only the triangles come back. ``input_delay="auto"`` streams the
-    logs again for every delay it tries. A log listed twice is refused
+    logs once, forming b_ID at the node delays of its bracket (:func:`_delay_search`). A log
+    listed twice is refused
     (:func:`ropod_sysid.io.check_distinct`); with ``options.split_gaps`` a log with gaps in
     time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`). With ``plots``
     the last pass also gathers what the report draws of each log (:attr:`LogFit.plot`;
@@ -360,10 +397,12 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         check_source(p, platform)
     say = progress or (lambda _msg: None)
     with pool(workers, dask_address, quiet=quiet) as run:
-        def reduce(delay: float, plot: bool) -> list[tuple[str, Triangles, list[str],
-                                                           LogPlot | None]]:
+        def reduce(delay: float | DelayBracket, plot: bool,
+                   ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
-                + (f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
+                + (f" (input delays ±{1000 * delay.top:.0f} ms)"
+                   if isinstance(delay, DelayBracket) else
+                   f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
             parts = run(piece_triangles, paths, platform=platform, span=options.span,
                         input_delay=delay, friction=options.friction,
                         chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step,
@@ -373,6 +412,59 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         return _fit(reduce, platform, options)
 
 
+def _delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
+                  ) -> tuple[list[tuple[str, Triangles, list[str], LogPlot | None]], float]:
+    """``--input-delay auto``: one pass forms b_ID at the node delays of the bracket ±top
+    (:class:`ropod_sysid.regressor.DelayBracket`, top = ``max_delay``, at most one span);
+    the weighted residual variance at the nodes gives the delay by a parabola through the
+    smallest (:func:`parabola_vertex`), and the triangles of that delay follow from the
+    nodes' (:meth:`Triangles.at_delay`): no further pass over the logs. An optimum at the
+    bracket's end gets a note. Returns the logs' pieces at that delay and the delay."""
+    top = min(options.max_delay, options.span.value) if options.span.seconds \
+        else options.max_delay
+    wide = reduce(DelayBracket(top), True)
+    systems = [tri for _, tri, _, _ in wide]
+
+    def cost(d: float) -> float:
+        sol, _ = fit_systems([s.at_delay(d, stretches=False) for s in systems], names,
+                             options, calibrate=False)
+        return sol.sigma2
+
+    # the logs' nodes (their sample times may differ by rounding: merged within 1 µs)
+    nodes = np.unique(np.round(np.concatenate([s.delays for s in systems]), 6))  # type: ignore[arg-type]
+    costs = np.array([cost(float(d)) for d in nodes])
+    delay = parabola_vertex(nodes, costs)
+    out = []
+    for source, s, notes, plot in wide:
+        at = s.at_delay(delay)
+        if plot is not None and plot.b_rows.ndim == 3:
+            w = node_weights(s.delays, delay, s.delay_order)  # type: ignore[arg-type]
+            plot = replace(plot, b_rows=plot.b_rows @ w)
+        out.append((source, at, notes, plot))
+    if abs(delay) >= top - 2e-4:
+        out[0][2].append(f"--input-delay auto: the best delay, {1000 * delay:+.2f} ms, is at "
+                         f"the end of the bracket ±{1000 * top:.0f} ms searched: the lag may be "
+                         "longer, or the residual hardly depends on it; give a delay in seconds "
+                         "to check")
+    return out, delay
+
+
+def parabola_vertex(x: np.ndarray, y: np.ndarray, width: int = NODE_FIT) -> float:
+    """The minimum of the quadratic fitted to the ``width`` points of (``x``, ``y``) nearest
+    the smallest ``y``, held within those points (at a node when too few or not convex).
+    The delay search fits the costs at the node delays only: between nodes the interpolated
+    torques average the current noise, which would pull the minimum to mid-sample delays."""
+    i = int(np.argmin(y))
+    lo = int(np.clip(i - width // 2, 0, max(len(x) - width, 0)))
+    xs, ys = x[lo: lo + width], y[lo: lo + width]
+    if len(xs) < 3:
+        return float(x[i])
+    c2, c1, _ = np.polyfit(xs - x[i], ys, 2)
+    if c2 <= 0:
+        return float(x[i])
+    return float(np.clip(x[i] - c1 / (2 * c2), xs[0], xs[-1]))
+
+
 def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay."""
     model = PlatformModel(platform)
@@ -380,20 +472,10 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     check_fixed(options.fix, names)  # before the logs are read
     delay = 0.0
     if options.input_delay == "auto":
-        def cost(d: float) -> float:
-            sol, _ = fit_systems([tri for _, tri, _, _ in reduce(d, False)], names, options)
-            return sol.sigma2
-
-        from scipy.optimize import minimize_scalar  # imported here: only the delay search
-
-        top = min(options.max_delay, options.span.value) if options.span.seconds \
-            else options.max_delay  # at most one span (check_input_delay)
-        res = minimize_scalar(cost, bounds=(0.0, top),
-                                             method="bounded", options={"xatol": 2e-4})
-        delay = float(res.x)
+        reduced, delay = _delay_search(reduce, names, options)
     else:
         delay = float(options.input_delay)
-    reduced = reduce(delay, True)
+        reduced = reduce(delay, True)
     for source, tri, _, _ in reduced:
         if tri.torque_free():
             raise InputError(f"{source}: the motor currents are all zero, so there is no torque "
@@ -406,8 +488,9 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
                        combined_rms(systems, solution.values), delay)
     if options.physical:
         r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
-        result.physical = solve(r, 3 * sum(s.rows for s in systems), names, options.fix,
+        result.physical = solve(r, 3 * sum(s.equations for s in systems), names, options.fix,
                                 options.rcond, bounds=physical_bounds(names),
-                                correlation=mean_correlation(systems))
+                                correlation=mean_correlation(systems),
+                                stretches=weighted_stretches(systems, weights))
         result.physical_rms = combined_rms(systems, result.physical.values)
     return result

@@ -34,7 +34,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_angles
 from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
-from ropod_sysid.solve import Triangles, qr_triangle
+from ropod_sysid.solve import STRETCH_S, Triangles, qr_triangle, stretch_grams
 from ropod_sysid.tracker import with_fused_pose
 
 DEFAULT_SPAN_S = 0.1
@@ -189,19 +189,58 @@ class Span:
 
 
 def check_input_delay(delay: float, span_seconds: float | None = None) -> None:
-    """An input delay [s] is finite, ≥ 0 (the logged torques are only shifted later in time:
-    the motion lags the torque) and at most one smoother span ``span_seconds`` (a longer lag
-    is no transport delay; it pairs torques with unrelated motion)."""
+    """An input delay [s] is finite and at most one smoother span ``span_seconds`` either way
+    (a longer lag is no transport delay; it pairs torques with unrelated motion). Positive: the
+    motion lags the logged torque (the torques are shifted later); negative: the motion leads
+    it (the drive logs its torque late)."""
     if not math.isfinite(delay):
-        raise InputError(f"--input-delay {delay:g}: must be a finite number of seconds ≥ 0, "
-                         "e.g. 0.0025, or auto")
-    if delay < 0:
-        raise InputError(f"--input-delay {delay:g}: negative delays (motion ahead of the "
-                         "logged torque) are not supported; give a delay ≥ 0 s or auto")
-    if span_seconds is not None and delay > span_seconds:
+        raise InputError(f"--input-delay {delay:g}: must be a finite number of seconds, e.g. "
+                         "0.0025 (negative: the motion leads the logged torque), or auto")
+    if span_seconds is not None and abs(delay) > span_seconds:
+        either = " either way" if delay < 0 else ""
         raise InputError(f"--input-delay {delay:g}: longer than the smoother span "
-                         f"({span_seconds:.3g} s); give at most {span_seconds:.3g} s, auto, "
-                         "or a longer --span")
+                         f"({span_seconds:.3g} s); give at most {span_seconds:.3g} s{either}, "
+                         "auto, or a longer --span")
+
+
+MAX_DELAY_NODES = 9  # node delays of --input-delay auto's single pass (at most)
+
+
+@dataclass(frozen=True)
+class DelayBracket:
+    """``--input-delay auto``: the delays in [−top, top] [s] are searched from one pass that
+    forms b_ID for a few node delays. b_ID = B_τ τ (eq. 35) is linear in the torques, and so are
+    the rows' torque average and LOESS, so the b_ID of a delay between two nodes one sample
+    apart is exactly their linear interpolation (that of :func:`delayed`);
+    :meth:`ropod_sysid.solve.Triangles.at_delay` forms the triangles of any delay from the
+    node columns. Nodes are every sample while at most :data:`MAX_DELAY_NODES` cover the
+    bracket, else every few samples, interpolated by cubics (approximate)."""
+
+    top: float
+
+    def _step(self, dt: float) -> tuple[int, int]:
+        n = max(1, math.ceil(self.top / dt - 1e-9))
+        h = max(1, math.ceil(2 * n / (MAX_DELAY_NODES - 1)))
+        return h, math.ceil(n / h)
+
+    def nodes(self, dt: float) -> np.ndarray:
+        """The node delays [s] for sample time ``dt``: whole samples, covering ±``top``."""
+        h, j = self._step(dt)
+        return dt * h * np.arange(-j, j + 1)
+
+    def order(self, dt: float) -> int:
+        """Interpolation order between the nodes (:func:`ropod_sysid.solve.node_weights`):
+        1 (exact) for nodes a sample apart, else 3."""
+        return 1 if self._step(dt)[0] == 1 else 3
+
+
+def delay_reach(delay: float | np.ndarray, dt: float) -> tuple[int, int]:
+    """Samples before and after a torque sample that its delayed value reaches (positive and
+    negative delays, with two samples to spare)."""
+    d = np.atleast_1d(np.asarray(delay, float))
+    back = math.ceil(max(float(d.max()), 0.0) / dt) + 2 if d.max() > 0 else 0
+    ahead = math.ceil(max(-float(d.min()), 0.0) / dt) + 2 if d.min() < 0 else 0
+    return back, ahead
 
 
 @dataclass(frozen=True)
@@ -251,6 +290,11 @@ class RowGrid:
             return 1.0
         return float(1.0 / np.sum(signals.loess_kernel(self.span) ** 2))
 
+    def stretch_rows(self, dt: float) -> int:
+        """Rows per stretch of :data:`ropod_sysid.solve.STRETCH_S` seconds at sample time
+        ``dt`` (the unit the jackknife σ leaves out; :class:`ropod_sysid.solve.Triangles`)."""
+        return max(1, int(round(STRETCH_S / (dt * self.step))))
+
     def trim(self, k: int) -> int:
         """Samples dropped at each end of a log: the shifted end windows of the smoother
         over ``k`` samples and of the rows' LOESS (``k`` when ``step`` is 1)."""
@@ -274,6 +318,8 @@ class Preprocessed:
     notes: list[str] = field(default_factory=list)
     trim: int = 0  # samples dropped at each end after filtering the equations
     grid: RowGrid = field(default_factory=lambda: RowGrid(1, 3))
+    delays: np.ndarray | None = None  # node delays of tau (M, A, n) (DelayBracket), or None
+    delay_order: int = 1  # their interpolation order (DelayBracket.order)
 
     def window(self, start: int, stop: int) -> Preprocessed:
         """Samples start:stop (untrimmed indices) as a new block."""
@@ -284,7 +330,8 @@ class Preprocessed:
         i = index
         return Preprocessed(self.t[i], self.q[i], self.qd[i], self.qdd[i], self.angles[i],
                             self.angle_rates[i], self.tau[i], self.source,
-                            self.span_samples, self.dt, self.notes, 0, self.grid)
+                            self.span_samples, self.dt, self.notes, 0, self.grid, self.delays,
+                            self.delay_order)
 
     def row_samples(self) -> np.ndarray:
         """Indices of the samples that become equation rows (after trimming)."""
@@ -296,13 +343,26 @@ class Preprocessed:
         return len(range(self.trim, len(self.t) - self.trim, self.grid.step))
 
 
-def delayed(t: np.ndarray, tau: np.ndarray, input_delay: float) -> np.ndarray:
+def delayed(t: np.ndarray, tau: np.ndarray, input_delay: float | np.ndarray) -> np.ndarray:
     """Torques (N, A) shifted later by ``input_delay`` [s]: the torque logged at t acts on the
-    motion at t + delay (linear interpolation, held at the first sample)."""
+    motion at t + delay (linear interpolation, held at the first and last sample). Several
+    delays (n,) give (N, A, n)."""
+    if np.ndim(input_delay):
+        return shifted(tau, np.asarray(input_delay) / float(np.median(np.diff(t))))
     if not input_delay:
         return tau
     return np.stack([np.interp(t - input_delay, t, tau[:, j]) for j in range(tau.shape[1])],
                     axis=1)
+
+
+def shifted(tau: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Torques (N, A) on a uniform grid shifted later by whole numbers of samples ``shifts``
+    (n,), held at the first and last sample: (N, A, n) (:class:`DelayBracket`'s nodes; equal
+    to :func:`delayed` of those delays)."""
+    n = len(tau)
+    js = np.rint(np.asarray(shifts, float)).astype(int)
+    idx = np.clip(np.arange(n)[:, None] - js[None, :], 0, n - 1)  # (N, n)
+    return np.moveaxis(tau[idx], 1, 2)
 
 
 def tracker_pose(pose: np.ndarray) -> np.ndarray:
@@ -327,11 +387,13 @@ def derivatives(model: PlatformModel, angles_s: np.ndarray, pose_s: np.ndarray |
 
 
 def preprocess(log: Log, platform: Platform, span: Span | None = None,
-               input_delay: float = 0.0, row_step: int | None = None) -> Preprocessed:
+               input_delay: float | DelayBracket = 0.0, row_step: int | None = None,
+               ) -> Preprocessed:
     """Smooth, differentiate and trim one log (Sec. VI-B).
 
     ``input_delay`` [s] shifts the torques: the torque logged at t acts on the motion at
-    t + delay. ``row_step``: samples between equation rows (:class:`RowGrid`; None: about ten
+    t + delay; a :class:`DelayBracket` gives the torques at its node delays. ``row_step``:
+    samples between equation rows (:class:`RowGrid`; None: about ten
     per smoother span).
     """
     span = span or Span.parse(None)
@@ -354,16 +416,19 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
         t = t_new
     n = len(t)
     k = span.samples(dt, n)
-    check_input_delay(input_delay, k * dt)
+    nodes = input_delay.nodes(dt) if isinstance(input_delay, DelayBracket) else None
+    if nodes is None:
+        check_input_delay(float(input_delay), k * dt)  # type: ignore[arg-type]
     grid = RowGrid.for_span(k, row_step)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
     check_length(log.source, n, k, dt, trim)
     angles_s = signals.loess(angles, k)
     pose_s = None if pose is None else signals.loess(tracker_pose(pose), k)
     q, qd, qdd, rates, _ = derivatives(model, angles_s, pose_s, dt)
-    tau = delayed(t, platform.torque_constants() * current, input_delay)
+    tau = delayed(t, platform.torque_constants() * current,
+                  nodes if nodes is not None else input_delay)  # type: ignore[arg-type]
     return Preprocessed(t, q, qd, qdd, angles_s, rates, tau, log.source, k, dt, notes, trim,
-                        grid)
+                        grid, nodes, input_delay.order(dt) if nodes is not None else 1)  # type: ignore[union-attr]
 
 
 def at_rest(pre: Preprocessed) -> np.ndarray:
@@ -377,7 +442,8 @@ def at_rest(pre: Preprocessed) -> np.ndarray:
 
 def raw_system(model: PlatformModel, pre: Preprocessed,
                friction: Friction = "per-wheel") -> tuple[np.ndarray, np.ndarray]:
-    """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66).
+    """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66);
+    b_ID (M, 3, n) for torques at n node delays (:class:`DelayBracket`).
 
     Rows at rest (:func:`at_rest`) are zero on both sides: standing still, static friction
     holds whatever torques the drives apply (speed loops holding opposing currents, a
@@ -385,7 +451,11 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
     holds for any parameters, so the rows' filter mixes nothing false into its neighbours.
     """
     st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
-    a, b = model.a_id_ext(st, pre.qdd, friction), model.b_id(st, pre.tau)
+    a = model.a_id_ext(st, pre.qdd, friction)
+    if pre.tau.ndim == 3:  # b_ID = B_τ τ (eq. 35) per node delay
+        b = np.einsum("nca,nak->nck", st.b_tau, pre.tau)
+    else:
+        b = model.b_id(st, pre.tau)
     rest = at_rest(pre)
     if rest.any():
         a[rest] = 0.0
@@ -444,38 +514,49 @@ def filtered_system(model: PlatformModel, pre: Preprocessed,
     return (np.concatenate([a for _, a, _ in parts]), np.concatenate([b for _, _, b in parts]))
 
 
-def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
+def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: int = 0,
+                    stretch_rows: int = 0) -> Triangles:
     """:meth:`Triangles.from_rows` of A (m, 3, p) and b (m, 3) by a two-level TSQR: leaves of
     :data:`QR_LEAF_ROWS` rows reduced by one batched QR, their triangles by one more. Same
-    triangle up to rounding (and row signs), several times faster on tall blocks."""
+    triangle up to rounding (and row signs), several times faster on tall blocks. With
+    ``stretch_rows`` also the stretches' normal-equation pieces
+    (:func:`ropod_sysid.solve.stretch_grams`; the block's first row is the log's row
+    ``first_row``)."""
     m, _, p = a.shape
+    b = b.reshape(m, 3, -1)  # (m, 3, n): b_ID at n node delays (DelayBracket)
+    w = p + b.shape[2]
     full = m // QR_LEAF_ROWS * QR_LEAF_ROWS
-    r = np.empty((3, p + 1, p + 1))
-    rows = np.empty((m, p + 1))
-    kept = int(np.count_nonzero(np.abs(a).sum(axis=(1, 2)) + np.abs(b).sum(axis=1)))
+    r = np.empty((3, w, w))
+    rows = np.empty((m, w))
+    idle = m - int(np.count_nonzero(np.abs(a).sum(axis=(1, 2)) + np.abs(b).sum(axis=(1, 2))))
     for d in range(3):
         rows[:, :p] = a[:, d, :]
-        rows[:, p] = b[:, d]
+        rows[:, p:] = b[:, d]
         parts = []
         if full:
-            leaves = np.linalg.qr(rows[:full].reshape(-1, QR_LEAF_ROWS, p + 1), mode="r")
-            parts.append(leaves.reshape(-1, p + 1))
+            leaves = np.linalg.qr(rows[:full].reshape(-1, QR_LEAF_ROWS, w), mode="r")
+            parts.append(leaves.reshape(-1, w))
         if m > full:
             parts.append(rows[full:])
         r[d] = qr_triangle(np.vstack(parts))
-    return Triangles(r, kept, label)  # (zero rows, at rest, count for nothing)
+    stretches = [stretch_grams(a, b, first_row, stretch_rows)] if stretch_rows else []
+    return Triangles(r, m, label, stretches=stretches, stretch_rows=stretch_rows,
+                     idle=idle)  # (zero rows, at rest, carry no equation)
 
 
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
               chunk: int = 20000) -> Triangles:
     """The log's QR triangles per DOF, built block by block (memory bounded by ``chunk``)."""
     tri: Triangles | None = None
-    for _, a, b in system(model, pre, friction, chunk):
-        block = block_triangles(a, b, pre.source)
+    per = pre.grid.stretch_rows(pre.dt)
+    for idx, a, b in system(model, pre, friction, chunk):
+        block = block_triangles(a, b, pre.source, (int(idx[0]) - pre.trim) // pre.grid.step,
+                                per)
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")
     tri.samples = len(pre.t) - 2 * pre.trim
     tri.duration = (len(pre.t) - 1) * pre.dt
     tri.correlation = pre.grid.correlation
+    tri.delays, tri.delay_order = pre.delays, pre.delay_order
     return tri

@@ -14,7 +14,7 @@ triangles after the fact.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
@@ -22,6 +22,8 @@ import scipy.linalg
 from ropod_sysid.errors import IdentifiabilityError, InputError
 
 DOF = ("x", "y", "theta")
+STRETCH_S = 2.0  # length of the stretches of a log the jackknife leaves out one at a time [s]
+MIN_STRETCHES = 4  # fewer stretches in all logs: no jackknife, the white-noise σ alone
 NULL_TOL = 1e-3  # relative size below which a null-space entry is treated as zero
 RCOND = 1e-4  # default: relative singular value below which a direction is unidentifiable
 
@@ -41,6 +43,47 @@ def qr_triangle(a: np.ndarray, b: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
+def node_weights(nodes: np.ndarray, delay: float, order: int = 1) -> np.ndarray:
+    """(n,) weights of the node delays' b_ID columns that give ``delay``'s
+    (:meth:`Triangles.at_delay`): ``order`` 1, linear interpolation between the two nearest
+    nodes (exact for nodes one sample apart); 3, the cubic through the four nearest (nodes
+    several samples apart)."""
+    n = len(nodes)
+    delay = float(np.clip(delay, nodes[0], nodes[-1]))
+    k = int(np.clip(np.searchsorted(nodes, delay) - 1, 0, n - 2))
+    w = np.zeros(n)
+    if order == 1 or n < 4:
+        f = (delay - nodes[k]) / (nodes[k + 1] - nodes[k])
+        w[k], w[k + 1] = 1.0 - f, f
+        return w
+    k0 = int(np.clip(k - 1, 0, n - 4))
+    x = nodes[k0: k0 + 4]
+    diff = x[:, None] - x[None, :] + np.eye(4)  # Lagrange: Π_{j≠i} (d − x_j) / (x_i − x_j)
+    num = np.where(np.eye(4, dtype=bool), 1.0, delay - x[None, :])
+    w[k0: k0 + 4] = np.prod(num / diff, axis=1)
+    return w
+
+
+def stretch_grams(a: np.ndarray, b: np.ndarray, first_row: int, stretch_rows: int,
+                  ) -> np.ndarray:
+    """(K, 2, p+1, p+1): [A b]ᵀ[A b] of the x and y rows together and of the θ rows of A
+    (m, 3, p) and b (m, 3), per stretch of ``stretch_rows`` rows counted from row 0 of the log,
+    the block's first row being row ``first_row`` (the first and last stretch of the block may
+    be partial; :meth:`Triangles.merge` joins them with the neighbouring blocks')."""
+    m, _, p = a.shape
+    b = b.reshape(m, 3, -1)  # (m, 3, n): b at n node delays (Triangles.delays)
+    w = p + b.shape[2]
+    cuts = np.arange(stretch_rows - first_row % stretch_rows, m, stretch_rows)
+    edges = np.concatenate([[0], cuts, [m]])
+    out = np.empty((len(edges) - 1, 2, w, w))
+    for i, (s, e) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+        ab = np.concatenate([a[s:e], b[s:e]], axis=2)
+        xy = ab[:, :2].reshape(-1, w)
+        out[i, 0] = xy.T @ xy
+        out[i, 1] = ab[:, 2].T @ ab[:, 2]
+    return out
+
+
 def stack_triangles(triangles: Sequence[np.ndarray]) -> np.ndarray:
     """Combine triangles of row blocks into the triangle of all rows (TSQR step)."""
     return qr_triangle(np.vstack(list(triangles)))
@@ -56,6 +99,15 @@ class Triangles:
     correlation : rows per independent row: the LOESS over the rows makes neighbours share
         their noise (1/Σh² of its kernel h, for a residual white before that filter)
     duration : length of the log the rows come from [s]
+    stretches : per stretch of ``stretch_rows`` rows (:data:`STRETCH_S` seconds, counted from
+        the log's first row; the last one may be shorter), the normal-equation pieces
+        [A b]ᵀ[A b] of its x and y rows together and of its θ rows: a list of blocks of
+        (K, 2, p+1, p+1) arrays, in row order. O(duration) small matrices, from which the
+        jackknife σ (:func:`jackknife_covariance`) is formed after the solve, without a second
+        pass over the logs.
+    delays : None, or the node delays [s] (n,) whose b_ID columns the triangles hold in place
+        of one ((3, p+n, p+n); ``--input-delay auto``): :meth:`at_delay` gives the triangles of
+        any delay between them, interpolating with ``delay_order`` (:func:`node_weights`).
     """
 
     r: np.ndarray
@@ -64,6 +116,16 @@ class Triangles:
     samples: int = 0
     correlation: float = 1.0
     duration: float = 0.0
+    stretches: list[np.ndarray] = field(default_factory=list, repr=False)
+    stretch_rows: int = 0
+    delays: np.ndarray | None = field(default=None, repr=False)
+    delay_order: int = 1
+    idle: int = 0  # rows at rest: zero rows, no equation (ropod_sysid.regressor.at_rest)
+
+    @property
+    def equations(self) -> int:
+        """Rows per DOF that carry an equation (:attr:`rows` less the idle ones)."""
+        return self.rows - self.idle
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
@@ -75,7 +137,46 @@ class Triangles:
         """Append another block of rows of the same system (streaming)."""
         r = np.stack([stack_triangles([self.r[d], other.r[d]]) for d in range(3)])
         return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples,
-                         self.correlation, self.duration + other.duration)
+                         self.correlation, self.duration + other.duration,
+                         self._joined_stretches(other), self.stretch_rows or other.stretch_rows,
+                         self.delays, self.delay_order, self.idle + other.idle)
+
+    def at_delay(self, delay: float, stretches: bool = True) -> Triangles:
+        """The triangles of one delay [s] from those of the node delays (:attr:`delays`): b_ID
+        of a delay is the linear interpolation of the two nearest nodes' columns (exact for
+        nodes a sample apart: :class:`ropod_sysid.regressor.DelayBracket`), and [A | b_d] =
+        [A | B] T, T = diag(I, w), so its triangle is that of R T and its stretches Tᵀ G T.
+        ``stretches=False`` leaves them out (a cheap cost function)."""
+        assert self.delays is not None
+        n = len(self.delays)
+        p = self.r.shape[-1] - n
+        t = np.zeros((p + n, p + 1))
+        t[:p, :p] = np.eye(p)
+        t[p:, p] = node_weights(self.delays, delay, self.delay_order)
+        r = np.stack([qr_triangle(rd @ t) for rd in self.r])
+        st = [t.T @ s @ t for s in self.stretches] if stretches else []
+        return Triangles(r, self.rows, self.label, self.samples, self.correlation,
+                         self.duration, st, self.stretch_rows, idle=self.idle)
+
+    def _joined_stretches(self, other: Triangles) -> list[np.ndarray]:
+        """The stretches of ``other`` (the rows after this block's) after this block's: when
+        this block ends inside a stretch, the other's first stretch completes it."""
+        if not self.stretches or not other.stretches:
+            return self.stretches + other.stretches
+        if self.stretch_rows and self.rows % self.stretch_rows:
+            last, first = self.stretches[-1].copy(), other.stretches[0]
+            last[-1] += first[0]
+            rest = [first[1:]] if len(first) > 1 else []
+            return self.stretches[:-1] + [last] + rest + other.stretches[1:]
+        return self.stretches + other.stretches
+
+    def weighted_stretches(self, w_rot: float) -> np.ndarray:
+        """(K, p+1, p+1): each stretch's [A b]ᵀ[A b] with the θ rows scaled by ``w_rot``."""
+        if not self.stretches:
+            p1 = self.r.shape[-1]
+            return np.zeros((0, p1, p1))
+        st = np.concatenate(self.stretches)
+        return st[:, 0] + w_rot**2 * st[:, 1]
 
     def torque_free(self) -> bool:
         """Whether the rows move the platform (A ≠ 0) with no torque at all (b = 0): the motor
@@ -84,7 +185,7 @@ class Triangles:
 
     def mean_square_b(self) -> np.ndarray:
         """Mean square of b_ID per DOF (3,): ‖b‖² = ‖R e_b‖² (column norms are kept)."""
-        return (self.r[:, :, -1] ** 2).sum(axis=1) / max(self.rows, 1)
+        return (self.r[:, :, -1] ** 2).sum(axis=1) / max(self.equations, 1)
 
     def rotation_weight(self) -> float:
         """Sec. VI-A: the weight w of the θ rows making mean(w² b_θ²) = mean(b_x², b_y²)."""
@@ -104,7 +205,7 @@ class Triangles:
     def rms(self, m: np.ndarray) -> dict[str, float]:
         """RMS residual of the direct EOM: translation rows [N] and rotation rows [N m]."""
         ss = self.residual_ss(m)
-        n = max(self.rows, 1)
+        n = max(self.equations, 1)
         return {"translation": float(np.sqrt((ss[0] + ss[1]) / (2 * n))),
                 "rotation": float(np.sqrt(ss[2] / n)),
                 "x": float(np.sqrt(ss[0] / n)), "y": float(np.sqrt(ss[1] / n)),
@@ -114,7 +215,7 @@ class Triangles:
 def combined_rms(systems: Sequence[Triangles], m: np.ndarray) -> dict[str, float]:
     """RMS over all stacked samples (translation, rotation), unweighted."""
     ss = sum(s.residual_ss(m) for s in systems)
-    n = max(sum(s.rows for s in systems), 1)
+    n = max(sum(s.equations for s in systems), 1)
     return {"translation": float(np.sqrt((ss[0] + ss[1]) / (2 * n))),
             "rotation": float(np.sqrt(ss[2] / n))}
 
@@ -124,8 +225,14 @@ class Solution:
     """A least-squares fit and how well the data determine it.
 
     values : (p,) parameter values (fixed ones included, as given)
-    std : (p,) standard deviations σ̂ √(c diag((AᵀA)⁻¹)) of the weighted system, c the rows'
-        ``correlation`` (:class:`Triangles`); NaN when fixed or determined only in combination
+    std : (p,) calibrated standard deviations: the larger of the delete-one-stretch jackknife's
+        (:func:`jackknife_covariance`; it sees residuals correlated over seconds and slowly
+        varying model and discretisation error) and ``std_white``; NaN when fixed or not
+        identifiable
+    std_white : (p,) the white-noise standard deviations σ̂ √(c diag((AᵀA)⁻¹)) of the weighted
+        system, c the rows' ``correlation`` (:class:`Triangles`): right only when sensor noise
+        dominates the residual (kept for comparison)
+    std_basis : what ``std`` is, in words (for the parameter file and the report)
     singular_values : of the column-scaled free regressor (descending)
     rank : numerical rank of the column-scaled free regressor
     condition_number : σ_max/σ_min of the column-scaled free regressor; when it is rank
@@ -148,6 +255,22 @@ class Solution:
     sigma2: float
     rows: int
     covariance: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0)))
+    std_white: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    std_basis: str = "white noise"
+    at_bound: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, dtype=bool))
+    note: str = ""  # e.g. a bounded fit of a rank-deficient system chose one point of a set
+
+    def combination_of(self, m: np.ndarray) -> np.ndarray:
+        """``m`` (p,) moved along the null space to where the solution's dependent parameters
+        (those set to 0) are 0: the identifiable combinations of ``m`` in the solution's terms,
+        e.g. a truth to compare the values with."""
+        m = np.asarray(m, float)
+        if not self.null_space.shape[1]:
+            return m.copy()
+        dep = np.flatnonzero(self.combination & ~np.isfinite(self.std)
+                             & ~np.isin(self.names, list(self.fixed)))
+        c = np.linalg.lstsq(self.null_space[dep], -m[dep], rcond=None)[0]
+        return m + self.null_space @ c
 
     def null_space_text(self, tol: float = 1e-3) -> list[str]:
         """Each null-space vector as 'a·name + b·name …' (largest coefficient 1)."""
@@ -167,6 +290,29 @@ def numerical_rank(sv: np.ndarray, rcond: float = RCOND) -> int:
     return int(np.sum(sv > rcond * sv[0])) if sv.size and sv[0] > 0 else 0
 
 
+def jackknife_covariance(stretches: np.ndarray, idx: np.ndarray, values: np.ndarray,
+                         scale: np.ndarray) -> np.ndarray:
+    """Delete-one-stretch jackknife covariance of the parameters ``idx`` of the least-squares
+    solution ``values`` (p,), from the stretches' normal-equation pieces G_k = [A_k b_k]ᵀ[A_k
+    b_k] ((K, p+1, p+1), weighted; :class:`Triangles`): leaving stretch k out moves the
+    solution by d_k = (H − H_k)⁻¹ g_k, with H = Σ H_k the normal matrix of ``idx`` and
+    g_k = A_kᵀ(A_k m − b_k) the stretch's score at the solution; cov = (K−1)/K Σ (d_k − d̄)
+    (d_k − d̄)ᵀ. Residuals correlated within a stretch (the rows' LOESS, slowly varying model
+    and discretisation error) enter through the scores, and each stretch's own leverage through
+    (H − H_k)⁻¹. ``scale``: column scales of ``idx`` (for the conditioning of the solves)."""
+    z = np.append(values, -1.0)
+    hk = stretches[:, idx][:, :, idx] / np.outer(scale, scale)
+    g = (stretches[:, idx, :] @ z) / scale
+    h = hk.sum(axis=0)
+    try:
+        d = np.linalg.solve(h[None] - hk, g[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # a stretch alone excites a parameter
+        d = (np.linalg.pinv(h[None] - hk, rcond=1e-12) @ g[..., None])[..., 0]
+    k = len(d)
+    dev = (d - d.mean(axis=0)) / scale
+    return (k - 1) / k * dev.T @ dev
+
+
 def check_rcond(rcond: float) -> None:
     """``rcond`` is a finite number in (0, 1): 0 counts noise as identifiable, 1 nothing."""
     if not (np.isfinite(rcond) and 0 < rcond < 1):
@@ -182,30 +328,22 @@ def check_fixed(fixed: Mapping[str, float], names: Sequence[str]) -> None:
             raise InputError(f"--fix {k}={v:g}: the value must be a finite number")
 
 
-def solve(r: np.ndarray, rows: int, names: Sequence[str],
-          fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
-          bounds: tuple[np.ndarray, np.ndarray] | None = None,
-          correlation: float = 1.0) -> Solution:
-    """Solve min ‖A m − b‖ from the triangle ``r`` of [A | b] (weighted, stacked).
+def _check_nonzero(values: np.ndarray) -> None:
+    """A solution of all zeros is no fit: the torques need no parameter."""
+    if not np.any(values):
+        raise IdentifiabilityError(
+            "the solution is all zeros: nothing in the logs' torques needs the parameters "
+            "(are the motor currents all zero?); check the current columns of the logs")
 
-    Parameters
-    ----------
-    r : (p+1, p+1) triangle; ``rows`` : number of rows it summarises (for σ̂²)
-    correlation : rows per independent row (:attr:`Triangles.correlation`): the covariance of
-        the values is σ̂² (AᵀA)⁻¹ times it
-    fixed : name → value held fixed (moved to the right-hand side)
-    rcond : singular values of the column-scaled regressor below ``rcond·σ_max`` count as zero;
-        those directions are reported in the null space and their dependent parameters are
-        set to zero, the independent ones then stand for identifiable combinations.
-    bounds : (lower, upper) arrays over all parameters for a bounded (physical) fit.
-    """
-    names = list(names)
-    p = len(names)
-    fixed = dict(fixed or {})
-    check_rcond(rcond)
-    check_fixed(fixed, names)
+
+def _free_system(r: np.ndarray, names: list[str], fixed: Mapping[str, float],
+                 ) -> tuple[list[int], list[int], np.ndarray, np.ndarray, np.ndarray,
+                            np.ndarray]:
+    """The fixed and free columns of the triangle ``r``, the fixed values, the free columns,
+    the right-hand side with the fixed ones moved to it, and the free columns' scales
+    (norms; 1 for a zero column). No free column with a nonzero norm: rank 0, an error."""
     fix_idx = [names.index(k) for k in fixed]
-    free = [j for j in range(p) if j not in fix_idx]
+    free = [j for j in range(len(names)) if j not in fix_idx]
     m_fix = np.array([fixed[names[j]] for j in fix_idx])
     c = r[:, free]
     d = r[:, -1] - (r[:, fix_idx] @ m_fix if fix_idx else 0.0)
@@ -214,7 +352,39 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
         raise IdentifiabilityError(
             "the regressor has rank 0: the logs do not excite any parameter; use logs in which "
             "the platform moves")
-    scale = np.where(norms > 0, norms, 1.0)
+    return fix_idx, free, m_fix, c, d, np.where(norms > 0, norms, 1.0)
+
+
+def solve(r: np.ndarray, rows: int, names: Sequence[str],
+          fixed: Mapping[str, float] | None = None, rcond: float = RCOND,
+          bounds: tuple[np.ndarray, np.ndarray] | None = None,
+          correlation: float = 1.0, stretches: np.ndarray | None = None) -> Solution:
+    """Solve min ‖A m − b‖ from the triangle ``r`` of [A | b] (weighted, stacked).
+
+    Parameters
+    ----------
+    r : (p+1, p+1) triangle; ``rows`` : number of rows it summarises (for σ̂²)
+    correlation : rows per independent row (:attr:`Triangles.correlation`): the white-noise
+        covariance of the values is σ̂² (AᵀA)⁻¹ times it
+    stretches : (K, p+1, p+1) the weighted stretches of all logs
+        (:meth:`Triangles.weighted_stretches`): with at least :data:`MIN_STRETCHES` the
+        standard deviations are the larger of the jackknife's (:func:`jackknife_covariance`)
+        and the white-noise ones
+    fixed : name → value held fixed (moved to the right-hand side)
+    rcond : singular values of the column-scaled regressor below ``rcond·σ_max`` count as zero;
+        those directions are reported in the null space and their dependent parameters are
+        set to zero, the independent ones then stand for identifiable combinations.
+    bounds : (lower, upper) arrays over all parameters for a bounded (physical) fit
+        (:func:`_bounded`).
+    """
+    names = list(names)
+    p = len(names)
+    fixed = dict(fixed or {})
+    check_rcond(rcond)
+    check_fixed(fixed, names)
+    if bounds is not None:
+        return _bounded(r, rows, names, fixed, rcond, bounds, correlation, stretches)
+    fix_idx, free, m_fix, c, d, scale = _free_system(r, names, fixed)
     cs = c / scale
     sv = np.linalg.svd(cs, compute_uv=False)
     rank = numerical_rank(sv, rcond)
@@ -271,23 +441,105 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
     idx = [free[j] for j in cols]
     values[idx] = y / scale[cols]
     cov_b = cov_s / np.outer(scale[cols], scale[cols])
+    std_white = std.copy()
+    std_white[idx] = np.sqrt(np.diag(cov_b))
+    basis = (f"white noise: σ̂ √(c diag((AᵀA)⁻¹)), c = {correlation:.3g} rows per independent "
+             "row")
+    if stretches is not None and len(stretches) >= MIN_STRETCHES:
+        y_full = values.copy()
+        y_full[idx] = y / scale[cols]
+        jack = jackknife_covariance(stretches, np.asarray(idx), y_full, scale[cols])
+        # the larger of the two per parameter, correlations from the jackknife
+        sd = np.sqrt(np.maximum(np.diag(jack), np.diag(cov_b)))
+        jd = np.sqrt(np.diag(jack))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(jd > 0, sd / jd, 0.0)
+        cov_b = np.where(np.outer(jd, jd) > 0, jack * np.outer(ratio, ratio), cov_b)
+        basis = (f"jackknife over {len(stretches)} stretches of {STRETCH_S:g} s (residuals "
+                 "correlated in time and slowly varying model error), at least the white-noise "
+                 "σ")
     std[idx] = np.sqrt(np.diag(cov_b))
     cov[np.ix_(idx, idx)] = cov_b
 
-    if bounds is not None:
-        lo, hi = (np.asarray(v, float) for v in bounds)
-        from scipy.optimize import lsq_linear  # imported here: only bounded fits need it
-
-        res = lsq_linear(cs, d, bounds=(lo[free] * scale, hi[free] * scale),
-                                        method="bvls", lsmr_tol="auto")
-        values[free] = res.x / scale
-
-    if not np.any(values[free]):
-        raise IdentifiabilityError(
-            "the solution is all zeros: nothing in the logs' torques needs the parameters "
-            "(are the motor currents all zero?); check the current columns of the logs")
+    _check_nonzero(values[free])
     # of the identifiable part: σ_max over the smallest singular value kept
     cond = float(sv[0] / sv[rank - 1])
     return Solution(names, values, std, sv, rank, cond, null, combination, combinations, fixed,
-                    sigma2, rows, cov)
+                    sigma2, rows, cov, std_white, basis)
 
+
+
+def _bounded(r: np.ndarray, rows: int, names: list[str], fixed: dict[str, float],
+             rcond: float, bounds: tuple[np.ndarray, np.ndarray], correlation: float,
+             stretches: np.ndarray | None) -> Solution:
+    """The bounded least-squares solution (BVLS) with its own account: the parameters it leaves
+    at a bound are held there (:attr:`Solution.at_bound`), and the free fit of the others at
+    that point — whose values are the bounded ones (the optimality conditions of a bounded
+    least-squares problem) — gives their σ, rank and combinations. When that fit is still rank
+    deficient the bounded solution is one point of a set of equally good ones: the parameters
+    of the combinations get no σ of their own, their ``combinations`` text gives the
+    identifiable combination with its value and σ, and :attr:`Solution.note` says so."""
+    from scipy.optimize import lsq_linear  # imported here: only bounded fits need it
+
+    p = len(names)
+    lo, hi = (np.asarray(v, float) for v in bounds)
+    fix_idx, free_list, m_fix, c, d, scale = _free_system(r, names, fixed)
+    free = np.array(free_list, dtype=int)
+    lo_s, hi_s = lo[free] * scale, hi[free] * scale
+    x = lsq_linear(c / scale, d, bounds=(lo_s, hi_s), method="bvls", lsmr_tol="auto").x
+    tol = 1e-9 * (1.0 + np.abs(x).max())
+    at = (np.isfinite(lo_s) & (x - lo_s <= tol)) | (np.isfinite(hi_s) & (hi_s - x <= tol))
+    x = np.where(at & (x - lo_s <= tol), lo_s, np.where(at, hi_s, x))
+    values = np.zeros(p)
+    values[fix_idx] = m_fix
+    values[free] = x / scale
+    _check_nonzero(values[free])
+    at_bound = np.zeros(p, dtype=bool)
+    at_bound[free[at]] = True
+    if at.all():  # every free parameter on a bound: nothing left to fit
+        none = np.full(p, np.nan)
+        return Solution(names, values, none, np.zeros(0), 0, np.nan, np.zeros((p, 0)),
+                        np.zeros(p, dtype=bool), {}, fixed, np.nan, rows,
+                        np.full((p, p), np.nan), none.copy(), "none: every free parameter is "
+                        "at a bound", at_bound)
+    held = {**fixed, **{names[j]: float(values[j]) for j in free[at]}}
+    inner = solve(r, rows, names, held, rcond, correlation=correlation, stretches=stretches)
+    std, white = inner.std.copy(), inner.std_white.copy()
+    combination = inner.combination.copy()
+    combinations = dict(inner.combinations)
+    note = ""
+    unbounded = solve(r, rows, names, fixed, rcond, correlation=correlation,
+                      stretches=stretches)
+    lower = np.zeros(p, dtype=bool)
+    lower[free[at & (x == lo_s)]] = True
+    if _slides(unbounded.null_space, lower, at_bound & ~lower):
+        tied = np.flatnonzero(np.any(unbounded.null_space != 0, axis=1))
+        note = ("the bounded fit chose one point of a set of equally good solutions: these "
+                f"logs cannot separate {', '.join(names[j] for j in tied)}; hold one of them "
+                "with --fix NAME=VALUE to choose the point")
+        comb = unbounded.combination_of(values)
+        for j in tied:
+            name = names[j]
+            sd = inner.std[j] if np.isfinite(inner.std[j]) else unbounded.std[j]
+            if np.isfinite(unbounded.std[j]):
+                combinations[name] = (f"one point of a set; identifiable: "
+                                      f"{unbounded.combinations.get(name, name)} = "
+                                      f"{comb[j]:.5g} ± {sd:.2g}")
+            else:
+                combinations[name] = ("one point of a set; not identifiable alone (hold it "
+                                      f"with --fix {name}=VALUE)")
+            std[j] = white[j] = np.nan
+            combination[j] = True
+    return replace(inner, values=values, std=std, std_white=white, combination=combination,
+                   combinations=combinations, fixed=fixed, at_bound=at_bound, note=note)
+
+
+def _slides(null: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> bool:
+    """Whether a point can move along a null-space direction (p, k) without leaving the
+    bounds it is on (``lower``, ``upper`` masks): then it is one point of a set of equally good
+    bounded solutions."""
+    for v in null.T:
+        for d in (v, -v):
+            if np.all(d[lower] >= 0) and np.all(d[upper] <= 0):
+                return True
+    return False

@@ -16,7 +16,12 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
    central differences, the rows' halo h = :attr:`ropod_sysid.regressor.RowGrid.halo`),
    odometry continued from the pose carried from the previous block, central differences,
    the rows of A_ID,ext and b_ID on the row grid (:class:`ropod_sysid.regressor.RowGrid`)
-   and their LOESS, and the QR triangles of the block's rows merged into the log's (TSQR).
+   and their LOESS, and the QR triangles of the block's rows merged into the log's (TSQR),
+   with the normal-equation pieces of its 2 s stretches for the jackknife σ
+   (:class:`ropod_sysid.solve.Triangles`; a block ending inside a stretch leaves it to the
+   next). With ``--input-delay auto`` b_ID is formed for each node delay of the bracket
+   (:class:`ropod_sysid.regressor.DelayBracket`), the window reaching back and ahead by the
+   largest delays.
 
 Every sample's value is computed from the same neighbours by the same formula as in one pass,
 so the triangles equal the in-memory ones to rounding (the FFT convolution of long windows is
@@ -38,7 +43,6 @@ of the next, each passed through steps 1–3 as a log of its own.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -67,6 +71,7 @@ from ropod_sysid.params import DynamicParameters, Friction, friction_of, paramet
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
+    DelayBracket,
     Preprocessed,
     RowGrid,
     Span,
@@ -75,6 +80,7 @@ from ropod_sysid.regressor import (
     check_input_delay,
     check_length,
     check_piece_samples,
+    delay_reach,
     delayed,
     derivatives,
     left_out,
@@ -133,7 +139,8 @@ class StreamResult:
 class _Blocks:
     """Step 3: blocks of kept samples with their halo, through to the merged triangles."""
 
-    def __init__(self, platform: Platform, span: Span, input_delay: float, friction: Friction,
+    def __init__(self, platform: Platform, span: Span, input_delay: float | DelayBracket,
+                 friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
                  keep_series: bool, row_step: int | None = None, threaded: bool = True,
                  plot: bool = False) -> None:
@@ -141,7 +148,8 @@ class _Blocks:
         self.model = PlatformModel(platform)
         self.k_t = platform.torque_constants()
         self.span = span
-        self.delay = float(input_delay)
+        self.bracket = input_delay if isinstance(input_delay, DelayBracket) else None
+        self.delay: float | np.ndarray = 0.0 if self.bracket else float(input_delay)  # type: ignore[arg-type]
         self.friction = friction
         self.chunk = max(int(chunk), 1)
         self.row_step = row_step
@@ -165,7 +173,10 @@ class _Blocks:
     def start(self, dt: float) -> None:
         self.dt = dt
         self.k = self.span.samples(dt, 0)
-        check_input_delay(self.delay, self.k * dt)
+        if self.bracket is not None:
+            self.delay = self.bracket.nodes(dt)  # b_ID at each node delay
+        else:
+            check_input_delay(float(self.delay), self.k * dt)  # type: ignore[arg-type]
         self.c = (self.k - 1) // 2
         self.grid = RowGrid.for_span(self.k, self.row_step)
         self.halo = self.grid.halo
@@ -173,7 +184,7 @@ class _Blocks:
         d = self.grid.step  # blocks start on the row grid
         self.block = max(self.chunk // d, 1) * d
         self.s = self.trim  # next kept sample to reduce
-        self.lookback = math.ceil(self.delay / dt) + 2 if self.delay else 0
+        self.lookback, self.lookahead = delay_reach(self.delay, dt)
         if self.params is not None:
             from scipy import signal as _signal  # slow to import; only the observer needs it
 
@@ -198,6 +209,9 @@ class _Blocks:
         self.tri.samples = n - 2 * self.trim
         self.tri.duration = (n - 1) * self.dt
         self.tri.correlation = self.grid.correlation
+        if self.bracket is not None:
+            self.tri.delays = self.delay  # type: ignore[assignment]
+            self.tri.delay_order = self.bracket.order(self.dt)
         return self.tri, self.obs, n
 
     def close(self) -> None:
@@ -230,7 +244,7 @@ class _Blocks:
                 last = e == end
             else:
                 e = s + self.block
-                if e + self.halo + 2 + c > self.avail:
+                if e + self.halo + 2 + max(c, self.lookahead) > self.avail:
                     return
                 last = False
             self._reduce(s, e, last, n)
@@ -258,7 +272,7 @@ class _Blocks:
         first = s == self.trim
         qa = 0 if first else s - halo - 2  # first sample of the pose
         r0 = max(0, min(qa - c, s - halo - self.lookback))  # first raw sample
-        r1 = n if last else e + halo + 2 + c
+        r1 = n if last else e + halo + 2 + max(c, self.lookahead)
         assert r1 is not None
         w = self._window(r0, r1)
         q1 = r1 if last else e + halo + 2
@@ -296,7 +310,8 @@ class _Blocks:
         if self.gather is not None:
             rows = first + self.grid.step * np.arange(count)
             self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows])
-        block = block_triangles(a, b, self.source)
+        block = block_triangles(a, b, self.source, (pa + first - self.trim) // self.grid.step,
+                                self.grid.stretch_rows(self.dt))
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
@@ -367,7 +382,7 @@ class _Run:
         return StreamResult(self.name, tri, notes, n, blocks.dt, blocks.k, obs, shown)
 
 
-def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
+def _pass(source: Source, platform: Platform, span: Span, input_delay: float | DelayBracket,
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
           resample: bool, prefetch: bool, row_step: int | None, split_gaps: bool,
           done: list[StreamResult | None], dropped: list[str], plot: bool = False) -> None:
@@ -427,7 +442,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float,
 
 
 def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
-                  input_delay: float = 0.0, friction: Friction = "per-wheel",
+                  input_delay: float | DelayBracket = 0.0, friction: Friction = "per-wheel",
                   chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                   keep_series: bool = False, prefetch: bool = True,
                   row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
@@ -463,7 +478,7 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
 
 
 def stream_log(source: Source, platform: Platform, span: Span | None = None,
-               input_delay: float = 0.0, friction: Friction = "per-wheel",
+               input_delay: float | DelayBracket = 0.0, friction: Friction = "per-wheel",
                chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                keep_series: bool = False, prefetch: bool = True,
                row_step: int | None = None, plot: bool = False) -> StreamResult:
@@ -491,7 +506,7 @@ def log_triangles(source: Source, platform: Platform, span: Span | None = None,
 
 
 def piece_triangles(source: Source, platform: Platform, span: Span | None = None,
-                    input_delay: float = 0.0, friction: Friction = "per-wheel",
+                    input_delay: float | DelayBracket = 0.0, friction: Friction = "per-wheel",
                     chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
                     split_gaps: bool = False, plot: bool = False,
                     ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:

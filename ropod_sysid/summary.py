@@ -13,9 +13,23 @@ from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
 from ropod_sysid.solve import Solution
 from ropod_sysid.validate import LogValidation
 
+MODEL_ERROR_RATIO = 2.0  # calibrated σ / white-noise σ above which model error dominates
+
+
+def model_error_ratio(result: FitResult) -> float:
+    """Median over the parameters of the calibrated σ over the white-noise σ
+    (:attr:`ropod_sysid.solve.Solution.std_white`): about 1 when sensor noise dominates the
+    residual; well above 1 when the residual is structured in time (model or discretisation
+    error), which the σ covers only as far as it varies, not a bias common to the whole run."""
+    sol = result.shown
+    ok = np.isfinite(sol.std) & np.isfinite(sol.std_white) & (sol.std_white > 0)
+    return float(np.median(sol.std[ok] / sol.std_white[ok])) if np.any(ok) else 1.0
+
 
 def identifiability_verdict(result: FitResult) -> str:
-    """One sentence on how well the data determine the parameters."""
+    """One sentence on how well the data determine the parameters: the rank analysis, the
+    calibrated σ and how much of the residual is model error (:func:`model_error_ratio`);
+    never "well determined" when one of them says otherwise."""
     sol = result.solution
     free = len(sol.names) - len(sol.fixed)
     if sol.rank < free:
@@ -28,12 +42,19 @@ def identifiability_verdict(result: FitResult) -> str:
         return (f"full rank but weakly determined: condition number "
                 f"{sol.condition_number:.3g}, worst relative std {100 * rel[worst]:.1f}% "
                 f"({sol.names[worst]})")
+    ratio = model_error_ratio(result)
+    if ratio > MODEL_ERROR_RATIO:
+        return (f"full rank, but the residual is mostly model or discretisation error, not "
+                f"sensor noise (σ {ratio:.2g}× the white-noise σ): values may be biased "
+                f"beyond σ; condition number {sol.condition_number:.3g}, worst relative std "
+                f"{100 * rel[worst]:.1f}% ({sol.names[worst]})")
     return (f"well determined: full rank, condition number {sol.condition_number:.3g}, "
             f"worst relative std {100 * rel[worst]:.1f}% ({sol.names[worst]})")
 
 
 def relative_std(result: FitResult) -> np.ndarray:
-    sol = result.solution
+    """|σ / value| of the values the fit reports (:attr:`FitResult.shown`)."""
+    sol = result.shown
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.abs(sol.std / sol.values)
 
@@ -86,8 +107,8 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
                compare_label: str | None = None) -> str:
     """Parameter table, RMS per translation/rotation and per log, rank and condition; with
     ``compare`` its values beside the fitted ones, the relative difference and Δ/σ."""
-    sol = result.solution
-    shown = result.physical.values if result.physical is not None else sol.values
+    sol = result.shown
+    shown = sol.values
     rel = relative_std(result)
     other = compared_values(sol, compare.values()) if compare is not None else {}
     lines = []
@@ -105,6 +126,8 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
         notes = []
         if name in sol.fixed:
             notes.append("fixed")
+        if sol.at_bound.size and sol.at_bound[j]:
+            notes.append(f"at its bound ({shown[j]:g}): held there, no σ")
         if sol.combination[j]:
             notes.append("combination: " + sol.combinations.get(name, ""))
         if implausible(name, shown[j]):
@@ -131,6 +154,10 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
                      f" / {lf.rms['rotation']:.4g} N m, rotation weight {lf.weight:.3g}")
         for note in lf.notes:
             lines.append(f"    note: {note}")
+    lines.append(f"std: {sol.std_basis}")
+    if sol.note:
+        lines.append(f"note: {sol.note}")
+    sol = result.solution
     free = len(sol.names) - len(sol.fixed)
     part = "" if sol.rank == free else ", of the identifiable part"
     lines.append(f"rank {sol.rank} of {free} free parameters, condition number "

@@ -46,10 +46,34 @@ def truth(off_square: Platform):
     return thesis_fixed_masses(off_square.unit_names)
 
 
+def subsampled(platform: Platform, res: SimResult, rate: float, sensors=None,
+               rng: np.random.Generator | None = None, source: str = "<simulation>",
+               ) -> SimResult:
+    """A simulated run logged at a lower ``rate`` (every k-th sample), recorded again with
+    ``sensors``: the same states as simulating at that rate (the integration step does not
+    depend on the log rate)."""
+    from ropod_sysid.simulate import Sensors
+
+    step = int(round(1.0 / (rate * (res.log.t[1] - res.log.t[0]))))
+    out = SimResult(None, res.q[::step], res.qd[::step], res.qdd[::step],  # type: ignore[arg-type]
+                    res.angles[::step], res.tau[::step], res.f_b[::step], res.energy[::step])
+    t = res.log.t[0] + np.arange(len(out.q)) / rate
+    out.log = record(platform, out, t, sensors or Sensors(), rng or np.random.default_rng(0),
+                     source)
+    return out
+
+
 @pytest.fixture(scope="session")
-def runs_off_square(off_square: Platform, truth) -> list[SimResult]:
-    """Four exact 8 s variants on the off-square platform (200 Hz logs)."""
-    return simulate(off_square, truth, four_variants(8.0), rate=200.0)
+def runs_off_square_1k(off_square: Platform, truth) -> list[SimResult]:
+    """Four exact 8 s variants on the off-square platform (1 kHz logs)."""
+    return simulate(off_square, truth, four_variants(8.0), rate=1000.0)
+
+
+@pytest.fixture(scope="session")
+def runs_off_square(off_square: Platform, runs_off_square_1k: list[SimResult],
+                    ) -> list[SimResult]:
+    """The same runs logged at 200 Hz (equal to simulating them at rate=200)."""
+    return [subsampled(off_square, r, 200.0) for r in runs_off_square_1k]
 
 
 @pytest.fixture(scope="session")
@@ -64,7 +88,13 @@ def runs_off_square_noisy(off_square: Platform, runs_off_square: list[SimResult]
 
 
 @pytest.fixture(scope="session")
-def runs_square() -> list[SimResult]:
-    """Four exact 6 s variants on the symmetric ropod (structurally rank deficient)."""
+def runs_square_1k() -> list[SimResult]:
+    """Four exact 6 s variants on the symmetric ropod (structurally rank deficient), 1 kHz."""
     pf = ropod_platform()
-    return simulate(pf, thesis_fixed_masses(pf.unit_names), four_variants(6.0), rate=200.0)
+    return simulate(pf, thesis_fixed_masses(pf.unit_names), four_variants(6.0), rate=1000.0)
+
+
+@pytest.fixture(scope="session")
+def runs_square(runs_square_1k: list[SimResult]) -> list[SimResult]:
+    """The same runs logged at 200 Hz (equal to simulating them at rate=200)."""
+    return [subsampled(ropod_platform(), r, 200.0) for r in runs_square_1k]

@@ -17,7 +17,8 @@ from tests.swivel_arrays import C, with_arrays
 from tests.test_cli import files, one_line_error, run  # noqa: F401  (files: a fixture)
 
 SPAN = "a number without 's' is a count of samples and must be an odd whole number ≥ 5"
-DELAY_RANGE = "must be a finite number of seconds ≥ 0, e.g. 0.0025, or auto"
+DELAY_RANGE = ("must be a finite number of seconds, e.g. 0.0025 (negative: the motion leads the "
+               "logged torque), or auto")
 RCOND = "must be a finite number in (0, 1), e.g. 0.0001"
 
 FIT_CASES = [
@@ -39,8 +40,9 @@ FIT_CASES = [
     (["--input-delay", "0.3", "--span", "0.25s"],
      "--input-delay 0.3: longer than the smoother span (0.25 s); give at most 0.25 s, auto, or "
      "a longer --span"),
-    (["--input-delay", "-0.001"], "--input-delay -0.001: negative delays (motion ahead of the "
-                                  "logged torque) are not supported; give a delay ≥ 0 s or auto"),
+    # negative delays (the motion leads the logged torque) are accepted up to one span (issue 14)
+    (["--input-delay", "-0.3"], "--input-delay -0.3: longer than the smoother span (0.1 s); give "
+                                "at most 0.1 s either way, auto, or a longer --span"),
     (["--fix", "m_b=nan"], "--fix 'm_b=nan': the value must be a finite number, e.g. --fix "
                            "m_b=35.1"),
     (["--fix", "m_b=-inf"], "--fix 'm_b=-inf': the value must be a finite number, e.g. --fix "

@@ -57,13 +57,14 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
 from ropod_sysid.report import figures
-from ropod_sysid.solve import combined_rms
+from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
     compared_values,
     difference,
     identifiability_verdict,
     implausible,
+    model_error_ratio,
     relative_std,
 )
 from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
@@ -214,8 +215,10 @@ def _verdict_class(text: str) -> str:
 
 
 def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
-               ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray]:
-    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs.
+               ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
+                          list[tuple[np.ndarray, np.ndarray]]]:
+    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
+    per log its kept rows' times and errors.
 
     The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
     the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
@@ -224,6 +227,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
     platform = result.platform
     opts = result.options
     views, errs, vels = [], [], []
+    series: list[tuple[np.ndarray, np.ndarray]] = []
     fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.layout)
     for k, lf in enumerate(result.logs):
         plot = lf.plot
@@ -237,6 +241,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         fit = plot.a_rows @ shown
         err = plot.b_rows - fit
         errs.append(err)
+        series.append((plot.t_rows, err))
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
         views.append({
@@ -244,7 +249,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "id": f"log-{k + 1}",
             "source": lf.source,
             "name": _short(lf.source),
-            "samples": lf.triangles.rows,
+            "samples": lf.triangles.equations,
             "raw_samples": plot.samples,
             "duration": plot.duration,
             "rate": 1.0 / plot.dt if plot.dt > 0 else float("nan"),
@@ -261,12 +266,12 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
-    return views, all_err, all_vel
+    return views, all_err, all_vel, series
 
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
                     compare: ParameterFile | None) -> tuple[list[dict[str, Any]], list[str]]:
-    sol = result.solution
+    sol = result.shown
     rel = relative_std(result)
     other = compared_values(sol, compare.values()) if compare is not None else {}
     other_std = compare.stds() if compare is not None else {}
@@ -278,6 +283,10 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
         flags = []
         if name in sol.fixed:
             flags.append(("fixed", "fixed", "held fixed in the fit"))
+        if sol.at_bound.size and sol.at_bound[j]:
+            flags.append(("at-bound", "at bound",
+                          f"on its physical bound ({value:g}) in the bounded fit: held there, "
+                          "so it has no σ"))
         if sol.combination[j]:
             flags.append(("combination", "combination",
                           sol.combinations.get(name, "determined only in combination")))
@@ -330,7 +339,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     rms = result.physical_rms if result.physical_rms is not None else result.rms
     verdict = identifiability_verdict(result)
 
-    log_views, all_err, all_vel = _log_views(result, logs, shown)
+    log_views, all_err, all_vel, series = _log_views(result, logs, shown)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
 
@@ -366,6 +375,9 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "logs": log_views,
         "samples": int(sum(v["samples"] for v in log_views)),
         "correlation": mean_correlation([lf.triangles for lf in result.logs]),
+        "std_basis": result.shown.std_basis,
+        "model_error_ratio": model_error_ratio(result),
+        "physical_note": result.shown.note,
         "span": str(result.options.span),
         "friction": result.options.friction,
         "rms": rms,
@@ -394,6 +406,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "combinations": [(k, v) for k, v in sol.combinations.items()],
         "hist_figure": _png_uri(figures.residual_histograms(all_err)),
         "vel_figure": _png_uri(figures.residual_vs_velocity(all_vel, all_err)),
+        "acf_figure": _png_uri(figures.residual_autocorrelation(series, STRETCH_S)),
         "validation": validation,
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
     }

@@ -365,6 +365,48 @@ def residual_histograms(residuals: np.ndarray) -> bytes:
         return _png(fig)
 
 
+def autocorrelation(t: np.ndarray, err: np.ndarray, max_lag: float) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+    """Lags [s] (L,) and the autocorrelation (L, 3) per DOF of one log's residual rows ``err``
+    (r, 3) at the uniformly spaced times ``t`` (the kept rows), up to ``max_lag`` seconds
+    (FFT of the zero-padded series; normalised by the overlap, 1 at lag 0)."""
+    n = len(t)
+    if n < 3:
+        return np.zeros(0), np.zeros((0, 3))
+    step = float(np.median(np.diff(t)))
+    lags = min(n - 1, max(int(max_lag / step), 1)) + 1
+    r = err - err.mean(axis=0)
+    f = np.fft.rfft(r, 2 * n, axis=0)
+    acf = np.fft.irfft(np.abs(f) ** 2, axis=0)[:lags] / (n - np.arange(lags))[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        acf = np.where(acf[:1] > 0, acf / acf[:1], 0.0)
+    return step * np.arange(lags), acf
+
+
+def residual_autocorrelation(series: Sequence[tuple[np.ndarray, np.ndarray]], stretch: float,
+                             max_lag: float = 4.0) -> bytes:
+    """The residual's autocorrelation per DOF against the lag, one line per log (``series``:
+    its kept rows' times and errors), with the length of the jackknife's stretches: a residual
+    correlated beyond the rows' LOESS span is model error, not sensor noise."""
+    with _style():
+        fig = _figure(10.0, 2.6, left=0.06, bottom=0.2, top=0.88)
+        axes = fig.subplots(1, 3, sharey=True, gridspec_kw={"wspace": 0.06})
+        for t, err in series:
+            lags, acf = autocorrelation(t, err, max_lag)
+            for d, ax in enumerate(axes):
+                ax.plot(lags, acf[:, d], color=BLUE, lw=0.9, alpha=0.7)
+        for d, ax in enumerate(axes):
+            ax.axhline(0.0, color="0.6", lw=0.6)
+            ax.axvline(stretch, color=ORANGE, lw=1.0, ls="--",
+                       label=f"jackknife stretch {stretch:g} s")
+            ax.set_xlabel("lag [s]")
+            _title(ax, f"{DOF_LABELS[d]}")
+            if d == 0:
+                ax.set_ylabel("autocorrelation")
+                ax.legend(loc="upper right")
+        return _png(fig)
+
+
 def residual_vs_velocity(velocity: np.ndarray, residuals: np.ndarray, bins: int = 41) -> bytes:
     """Per DOF the error against the corresponding base velocity: a thinned scatter of the
     samples and the mean error in velocity bins (over all samples). Unmodelled friction shows
