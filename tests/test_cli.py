@@ -86,9 +86,16 @@ def test_fit_writes_each_format(files):
     out = d / "p.kelo"
     r = run("fit", *map(str, logs[:2]), "--platform", str(d / "platform.yaml"), "--out", str(out),
             "--format", "kelo", "--quiet")
+    assert r.exit_code == 2 and "needs every unit's 'ethercat_number'" in r.output
+    entries = yaml.safe_load((d / "platform.yaml").read_text())
+    for k, unit in enumerate(entries["units"]):
+        unit["ethercat_number"] = k + 1
+    (d / "kelo-platform.yaml").write_text(yaml.safe_dump(entries))
+    r = run("fit", *map(str, logs[:2]), "--platform", str(d / "kelo-platform.yaml"), "--out",
+            str(out), "--format", "kelo", "--quiet")
     assert r.exit_code == 0, r.output
-    kelo = yaml.safe_load(out.read_text())
-    assert kelo["wheel_diameter"] == pytest.approx(0.105) and "wheel0" in kelo
+    kelo = yaml.safe_load(out.read_text())["platform_driver"]["ros__parameters"]
+    assert kelo["wheel_diameter"] == pytest.approx(0.105) and kelo["wheel0"]["ethercat_number"] == 1
 
 
 def test_fit_summary_and_options(files):

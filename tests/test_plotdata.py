@@ -81,7 +81,7 @@ def test_stream_gathers_the_rows_and_samples_of_the_in_memory_path(off_square,
     kept = pre.row_samples()
     assert plot.row_stride == 1 and len(plot.t_rows) == len(kept)
     # the triangles count the rows that carry an equation: not those at rest (zero rows)
-    assert res.triangles.rows == np.count_nonzero(np.abs(b).sum(axis=1)) < len(kept)
+    assert res.triangles.equations == np.count_nonzero(np.abs(b).sum(axis=1)) < len(kept)
     np.testing.assert_allclose(plot.t_rows, pre.t[kept], rtol=0, atol=1e-12)
     np.testing.assert_allclose(plot.b_rows, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
     np.testing.assert_allclose(plot.qd_rows, pre.qd[kept], rtol=1e-9, atol=1e-9)

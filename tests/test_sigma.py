@@ -209,7 +209,8 @@ def test_without_stretches_the_std_is_the_white_noise_one(off_square, runs_off_s
     from ropod_sysid.solve import Triangles
 
     fit = fit_logs([r.log for r in runs_off_square], off_square)
-    bare = [Triangles(lf.triangles.r, lf.triangles.rows, correlation=lf.triangles.correlation)
+    bare = [Triangles(lf.triangles.r, lf.triangles.rows, correlation=lf.triangles.correlation,
+                      idle=lf.triangles.idle)
             for lf in fit.logs]
     sol, _ = fit_systems(bare, fit.names, FitOptions())
     np.testing.assert_allclose(sol.std, sol.std_white, rtol=1e-12)
