@@ -403,6 +403,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "sv_figure": _png_uri(figures.singular_values(sol.singular_values, sol.rank,
                                                       result.options.rcond)),
         "null_space": sol.null_space_text(),
+        "corr_figure": _png_uri(figures.correlation_matrix(sol.names, sol.covariance)),
         "combinations": [(k, v) for k, v in sol.combinations.items()],
         "hist_figure": _png_uri(figures.residual_histograms(all_err)),
         "vel_figure": _png_uri(figures.residual_vs_velocity(all_vel, all_err)),
