@@ -349,8 +349,7 @@ def correlation_matrix(names: Sequence[str], covariance: np.ndarray) -> bytes:
         fig = _figure(size, size * 0.86, left=0.14, bottom=0.14, right=0.9, top=0.95)
         ax = fig.add_subplot()
         ax.grid(False)
-        cmap = matplotlib.colormaps["RdBu_r"].copy()
-        cmap.set_bad("#dddddd")
+        cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="#dddddd")
         im = ax.imshow(np.ma.masked_invalid(corr), cmap=cmap, vmin=-1.0, vmax=1.0,
                        interpolation="nearest")
         ax.set_xticks(range(p), names, rotation=90, fontsize=7)
