@@ -113,6 +113,7 @@ class Platform:
     units: tuple[Any, ...]
     settings: dict[str, float] = field(default_factory=dict, compare=False)
     source: str = field(default="<memory>", compare=False)
+    joint_state: Any = field(default=None, compare=False)  # JointState mapping, if any
 
     @property
     def n_units(self) -> int:
@@ -137,7 +138,7 @@ class Platform:
         units = tuple(u.moved(p) for u, p in zip(self.units, np.asarray(positions, float),
                                                  strict=True))
         return Platform(self.name, self.friction_tanh_gain, units, dict(self.settings),
-                        self.source)
+                        self.source, self.joint_state)
 
     @cached_property
     def layout(self) -> Layout:
@@ -223,6 +224,8 @@ class Platform:
                                                                  if k != "type"}
             units.append(d)
         out["units"] = units
+        if self.joint_state is not None:
+            out["joint_state"] = self.joint_state.to_dict()
         return out
 
 
@@ -299,7 +302,15 @@ def platform_from_dict(data: Any, where: str = "<platform>", min_units: int = 2)
             raise InputError(f"{where}: 'units[{k}].name' {u.name!r} is used twice; names "
                              "must be unique")
         seen.add(u.name)
-    return Platform(str(data.get("name", "platform")), alpha, units, settings, where)
+    platform = Platform(str(data.get("name", "platform")), alpha, units, settings, where)
+    if "joint_state" in data:  # a robot that publishes sensor_msgs/JointState
+        from ropod_sysid.io.jointstate import parse_joint_state
+
+        lay = platform.layout
+        platform = Platform(platform.name, alpha, units, settings, where,
+                            parse_joint_state(data["joint_state"], where, lay.angle_names,
+                                              lay.current_names))
+    return platform
 
 
 def platform_of(specs: Sequence[Any], name: str = "platform", friction_tanh_gain: float = 10.0,

@@ -236,3 +236,77 @@ def test_kelo_drive_messages_read_like_the_smart_wheel_layout(tmp_path) -> None:
                                    atol=1e-4 * np.abs(P(run.log)).max())  # float32 angles
         np.testing.assert_allclose(np.cos(D(back)), np.cos(D(run.log)), atol=1e-6)
         np.testing.assert_allclose(C(back), C(run.log), rtol=1e-6, atol=1e-6)
+
+
+JOINT_STATE = ("std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\n"
+               "float64[] effort\n" + "=" * 80 + "\nMSG: std_msgs/Header\n"
+               "builtin_interfaces/Time stamp\nstring frame_id\n" + "=" * 80
+               + "\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+
+
+def test_any_robots_joint_states_through_the_platform_files_mapping(tmp_path) -> None:
+    """sensor_msgs/JointState of a 5DPO robot (joints named by the robot, in its own order,
+    with a joint the platform does not use; effort as torque): read through the platform
+    file's joint_state mapping, in MCAP and rosbag2, and refused without it in one line."""
+    import yaml
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.params import typical_parameters
+    from ropod_sysid.platform import load_platform, platform_from_dict
+    from ropod_sysid.simulate import Controller, simulate
+
+    from .conftest import four_variants
+    from .test_omni import PLATFORM
+
+    data = yaml.safe_load(PLATFORM.read_text())
+    data["joint_state"] = {"channels": {
+        **{f"phi_{u}": {"joint": f"wheel_{u}_joint", "field": "position"} for u in "0123"},
+        **{f"cur_{u}": {"joint": f"wheel_{u}_joint", "field": "effort", "effort_is_torque": True}
+           for u in "0123"}}}
+    pf = platform_from_dict(data, "5dpo-js.yaml")
+    assert platform_from_dict(pf.to_dict(), "again").joint_state == pf.joint_state
+    (run,) = simulate(pf, typical_parameters(pf, 2.34, 0.0228), four_variants(2.0)[:1],
+                      rate=100.0, controller=Controller(0.02, 0.4, 0.6))
+    log = run.log
+    tau = log.currents * pf.torque_constants()
+    names = ["lidar_tilt", "wheel_2_joint", "wheel_0_joint", "wheel_3_joint", "wheel_1_joint"]
+    order = [None, 2, 0, 3, 1]
+    name = "sensor_msgs/msg/JointState"
+    encode = serialize_dynamic(name, JOINT_STATE)[name]
+    t0 = 1_700_000_000
+    msgs = []
+    for k in range(log.n_samples):
+        sec = t0 + int(np.floor(log.t[k]))
+        nsec = int(round((log.t[k] - np.floor(log.t[k])) * 1e9))
+        pos = [0.1 if j is None else float(log.angles[k, j]) for j in order]
+        eff = [0.0 if j is None else float(tau[k, j]) for j in order]
+        msgs.append((sec * 10**9 + nsec, encode({
+            "header": {"stamp": {"sec": sec, "nanosec": nsec}, "frame_id": ""},
+            "name": names, "position": pos, "velocity": [0.0] * 5, "effort": eff})))
+    with open(tmp_path / "js.mcap", "wb") as f:
+        w = new_writer(f, profile="ros2")
+        sid = w.register_schema(name, "ros2msg", JOINT_STATE.encode())
+        cid = w.register_channel("/joint_states", "cdr", sid)
+        for k, (t, payload) in enumerate(msgs):
+            w.add_message(cid, t, payload, t, k)
+        w.finish()
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with Bag2Writer(tmp_path / "js_bag", version=9) as w:
+        conn = w.add_connection("/joint_states", name, typestore=ts)
+        for t, payload in msgs:
+            w.write(conn, t, payload)
+    for path in (tmp_path / "js.mcap", tmp_path / "js_bag"):
+        back = read_log(path, pf)
+        np.testing.assert_array_equal(back.angles, log.angles)
+        np.testing.assert_allclose(back.currents, log.currents, rtol=1e-14, atol=1e-17)
+        np.testing.assert_allclose(back.t - t0, log.t, atol=5e-7)  # (float64 at 1.7e9 s)
+    with pytest.raises(InputError) as err:
+        read_log(tmp_path / "js.mcap", load_platform(PLATFORM))
+    assert str(err.value) == (f"{tmp_path / 'js.mcap'}: the log is sensor_msgs/msg/JointState "
+                              "on /joint_states; map its joints to the unit channels in the "
+                              "platform file's 'joint_state' (see docs/file-formats.md)")
+    data["joint_state"]["channels"].pop("cur_3")
+    with pytest.raises(InputError, match=r"^p.yaml: 'joint_state'.channels lacks cur_3; map "
+                                         "every column of the log$"):
+        platform_from_dict(data, "p.yaml")

@@ -536,6 +536,8 @@ def layout_of(channel: Channel, schema: Schema | None) -> tuple[str, str] | None
         return "smartwheel", encoding
     if channel.topic == CONTRACT_TOPIC:
         return "contract", encoding
+    if name in ("sensor_msgs/msg/JointState", "sensor_msgs/JointState"):
+        return "jointstate", encoding
     return None
 
 
@@ -556,7 +558,8 @@ def pick_stream(scan: McapScan, where: str) -> Stream:
         raise InputError(
             f"{where}: no ropod-sysid log or smart-wheel data in this MCAP file (channels: "
             f"{listed}); expected topic {CONTRACT_TOPIC} or /sw_ethercat_parser/data")
-    found.sort(key=lambda s: (s.layout != "contract", -scan.counts.get(s.channel.id, 0)))
+    order = {"contract": 0, "smartwheel": 1, "jointstate": 2}
+    found.sort(key=lambda s: (order[s.layout], -scan.counts.get(s.channel.id, 0)))
     return found[0]
 
 
@@ -599,14 +602,23 @@ def iter_mcap_log(path: str | Path, platform: Platform, chunk: int = 50_000,
     batches = None
     if stream.channel.message_encoding == "ros1":
         stream, batches = _ros1_stream(path, stream, where)
-    if stream.layout == "contract":
-        pieces: Any = ContractPieces(stream, platform, where)
-    else:
-        from ropod_sysid.io.swframes import SmartWheelPieces
-
-        pieces = SmartWheelPieces(stream, platform, where, chunk)
+    pieces = layout_pieces(stream, platform, where, chunk)
     tb = TimeBase(where, pieces.locate, gaps)
     return _warned(checked_chunks(_chunks(path, chunk, scan, stream, pieces, batches), tb))
+
+
+def layout_pieces(stream: Stream, platform: Platform, where: str, chunk: int) -> Any:
+    """The decoder of the stream's layout: the tool's own, the smart-wheel data, or a
+    JointState mapped in the platform file (:mod:`ropod_sysid.io.jointstate`)."""
+    if stream.layout == "contract":
+        return ContractPieces(stream, platform, where)
+    if stream.layout == "jointstate":
+        from ropod_sysid.io.jointstate import JointStatePieces
+
+        return JointStatePieces(stream, platform, where)
+    from ropod_sysid.io.swframes import SmartWheelPieces
+
+    return SmartWheelPieces(stream, platform, where, chunk)
 
 
 def _ros1_stream(path: str | Path, stream: Stream, where: str

@@ -82,8 +82,7 @@ def iter_bag_log(path: str | Path, platform: Platform, chunk: int = 50_000,
     or holds no log."""
     from mcap.records import Channel, Schema
 
-    from ropod_sysid.io.mcapdecode import ContractPieces
-    from ropod_sysid.io.mcaplog import McapScan, _chunks, _warned, pick_stream
+    from ropod_sysid.io.mcaplog import McapScan, _chunks, _warned, layout_pieces, pick_stream
 
     where = str(path)
     reader = _open(Path(path), where)
@@ -104,12 +103,7 @@ def iter_bag_log(path: str | Path, platform: Platform, chunk: int = 50_000,
         convert = None
         if _is_ros1(reader):
             convert = ros1_to_cdr(conn.msgtype, stream.schema.data.decode(), where)
-        if stream.layout == "contract":
-            pieces: Any = ContractPieces(stream, platform, where)
-        else:
-            from ropod_sysid.io.swframes import SmartWheelPieces
-
-            pieces = SmartWheelPieces(stream, platform, where, chunk)
+        pieces = layout_pieces(stream, platform, where, chunk)
         tb = TimeBase(where, pieces.locate, gaps)
         yield from _warned(checked_chunks(
             _chunks(path, chunk, scan, stream, pieces,
