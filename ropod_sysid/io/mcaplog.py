@@ -636,26 +636,28 @@ def _ros1_stream(path: str | Path, stream: Stream, where: str
     as_cdr = Stream(stream.layout, "ros2", stream.channel,
                     Schema(id=schema.id, name=schema.name, encoding="ros2msg",
                            data=schema.data), stream.messages)
-    cid = stream.channel.id
+    return as_cdr, ([convert(r) for r in raw]
+                    for raw in _payload_batches(path, stream.channel.id))
 
-    def batches() -> Iterator[list[bytes]]:
-        records = _records(path, McapScan(), light=True)
-        raw: list[bytes] = []
-        try:
-            for record in records:
-                if isinstance(record, MessageRun):
-                    raw.extend(record.of(cid))
-                elif isinstance(record, Message) and record.channel_id == cid:
-                    raw.append(record.data)
-                if len(raw) >= BATCH:
-                    yield [convert(r) for r in raw]
-                    raw = []
-        finally:
-            records.close()
-        if raw:
-            yield [convert(r) for r in raw]
 
-    return as_cdr, batches()
+def _payload_batches(path: str | Path, cid: int) -> Iterator[list[bytes]]:
+    """The payloads of channel ``cid`` in file order, in batches of about :data:`BATCH`,
+    read as they are needed (the reader stops where the file is damaged)."""
+    records = _records(path, McapScan(), light=True)
+    raw: list[bytes] = []
+    try:
+        for record in records:
+            if isinstance(record, MessageRun):
+                raw.extend(record.of(cid))
+            elif isinstance(record, Message) and record.channel_id == cid:
+                raw.append(record.data)
+            if len(raw) >= BATCH:
+                yield raw
+                raw = []
+    finally:
+        records.close()
+    if raw:
+        yield raw
 
 
 def _warned(logs: Iterator[Log]) -> Iterator[Log]:
@@ -702,31 +704,19 @@ def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces
             yield from pieces.logs(rows.take(0, chunk), done, False)
             done += chunk
 
-    records = _records(path, McapScan(), light=True) if batches is None else None
+    source = _payload_batches(path, cid) if batches is None else batches
     try:
-        if batches is not None:
-            for batch in batches:
-                raw.extend(batch)
-                if not decode():
-                    break
-                yield from ready()
-            else:
-                decode()
+        for batch in source:
+            raw.extend(batch)
+            if not decode():
+                break
+            yield from ready()
         else:
-            for record in records:
-                if isinstance(record, MessageRun):
-                    raw.extend(record.of(cid))
-                elif isinstance(record, Message) and record.channel_id == cid:
-                    raw.append(record.data)
-                if len(raw) >= BATCH:
-                    if not decode():
-                        break
-                    yield from ready()
-            else:
-                decode()
+            decode()
     finally:
-        if records is not None:
-            records.close()
+        close = getattr(source, "close", None)
+        if close is not None:
+            close()
     yield from ready()
     _check_recovered(decoded, damage, stream, where)
     rows = Rows.join(pending) if pending else None
