@@ -112,7 +112,8 @@ class Envelope:
 
 
 class RowSample:
-    """Every ``stride``-th row of a stream of rows (t, A, b, q̇), at most ``max_rows`` kept."""
+    """Every ``stride``-th row of a stream of rows (t, A, b, q̇ and the rows' state), at most
+    ``max_rows`` kept."""
 
     def __init__(self, max_rows: int = MAX_ROWS) -> None:
         self.max_rows = max(int(max_rows), 1)
@@ -121,13 +122,13 @@ class RowSample:
         self.parts: list[tuple[np.ndarray, ...]] = []
         self.kept = 0
 
-    def push(self, t: np.ndarray, a: np.ndarray, b: np.ndarray, qd: np.ndarray) -> None:
+    def push(self, t: np.ndarray, *arrays: np.ndarray) -> None:
         idx = self.seen + np.arange(len(t))
         self.seen += len(t)
         keep = idx % self.stride == 0
         if not keep.any():
             return
-        self.parts.append((idx[keep], t[keep], a[keep], b[keep], qd[keep]))
+        self.parts.append((idx[keep], t[keep], *(v[keep] for v in arrays)))
         self.kept += int(keep.sum())
         while self.kept > self.max_rows:
             self.stride *= 2
@@ -137,7 +138,7 @@ class RowSample:
             self.kept = int(keep.sum())
 
     def arrays(self, with_index: bool = False) -> tuple[np.ndarray, ...]:
-        """(t, A, b, q̇) of the kept rows (with their row numbers first if asked)."""
+        """(t, A, b, q̇, …) of the kept rows (with their row numbers first if asked)."""
         if not self.parts:
             raise ValueError("no rows")
         joined = tuple(np.concatenate(v) for v in zip(*self.parts, strict=True))
@@ -166,6 +167,9 @@ class LogPlot:
     dt: float  # sample time of the grid [s]
     span_samples: int  # the smoother's span
     row_step: int  # samples between equation rows
+    # the rows' state (q, q̈, unit angles, their rates, actuator torques), for the model's
+    # predicted velocity (:func:`ropod_sysid.report.predicted_velocity`); None if not kept
+    state_rows: tuple[np.ndarray, ...] | None = None
 
 
 class PlotGather:
@@ -197,15 +201,19 @@ class PlotGather:
             self.turning.push(t, turning)
         self.torque.push(t, torque.reshape(len(t), -1))
 
-    def push_rows(self, t: np.ndarray, a: np.ndarray, b: np.ndarray, qd: np.ndarray) -> None:
-        self.rows.push(t, a, b, qd)
+    def push_rows(self, t: np.ndarray, a: np.ndarray, b: np.ndarray, qd: np.ndarray,
+                  *state: np.ndarray) -> None:
+        """Rows: times, filtered A_ID,ext and b_ID, q̇, and their state (q, q̈, angles, angle
+        rates, torques)."""
+        self.rows.push(t, a, b, qd, *state)
 
     def result(self, samples: int, duration: float, has_pose: bool, dt: float,
                span_samples: int, row_step: int) -> LogPlot:
-        t, a, b, qd = self.rows.arrays()
+        t, a, b, qd, *state = self.rows.arrays()
         assert self.start is not None and self.end is not None
         w, n_tau = self.widths
         turning = self.turning.lines(w) if w else (np.zeros((0, 0)), np.zeros((0, 0)))
         return LogPlot(t, a, b, qd, self.rows.stride, self.path.lines(), self.start, self.end,
                        self.velocity.lines(3), turning, self.torque.lines(n_tau),
-                       samples, duration, has_pose, dt, span_samples, row_step)
+                       samples, duration, has_pose, dt, span_samples, row_step,
+                       tuple(state) if len(state) == 5 and state[4].ndim == 2 else None)

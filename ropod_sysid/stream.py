@@ -309,7 +309,8 @@ class _Blocks:
         a, b = row_system(self.model, pre, first, count, self.friction)
         if self.gather is not None:
             rows = first + self.grid.step * np.arange(count)
-            self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows])
+            self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows], pre.q[rows], pre.qdd[rows],
+                                  pre.angles[rows], pre.angle_rates[rows], pre.tau[rows])
         block = block_triangles(a, b, self.source, (pa + first - self.trim) // self.grid.step,
                                 self.grid.stretch_rows(self.dt))
         self.tri = block if self.tri is None else self.tri.merge(block)

@@ -102,3 +102,32 @@ def validate_logs(logs: Sequence[Log], platform: Platform, params: DynamicParame
                   row_step: int | None = None) -> list[LogValidation]:
     """:func:`validate_log` for each log."""
     return [validate_log(log, platform, params, span, input_delay, row_step) for log in logs]
+
+
+PREDICTION_WINDOW_S = 2.0  # the predicted velocity restarts from the measured one this often
+
+
+def predicted_velocity(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
+                       qd: np.ndarray, state: tuple[np.ndarray, ...],
+                       window: float = PREDICTION_WINDOW_S) -> np.ndarray:
+    """The base velocity (N, 3) the fitted model predicts under the measured torques: from
+    the measured q̇ at the start of each ``window`` [s], the trapezoidal integral of the
+    model's accelerations q̈ = M_dir⁻¹ (B_τ (τ + τ_f) + f_f + b_dir) (eq. 33) at the measured
+    pose and unit angles. ``state`` = (q, q̈, angles, angle rates, τ) at the times ``t``."""
+    q, _, angles, rates, tau = state
+    st = model.state(q, qd, angles, rates)
+    qdd = model.forward_dynamics(st, params, tau, friction=friction_of(params))
+    steps = 0.5 * (qdd[1:] + qdd[:-1]) * np.diff(t)[:, None]
+    integral = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+    seg = np.floor((t - t[0]) / window).astype(int)
+    start = np.searchsorted(seg, seg)  # first row of each row's window
+    return qd[start] + integral - integral[start]
+
+
+def fit_percentage(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖) per column (the fit of MATLAB's ``compare`` and WPILib's
+    SysId): 100 is a perfect prediction, 0 no better than the mean."""
+    err = np.linalg.norm(measured - predicted, axis=0)
+    spread = np.linalg.norm(measured - measured.mean(axis=0), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(spread > 0, 100.0 * (1.0 - err / spread), np.nan)

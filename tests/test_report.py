@@ -157,11 +157,11 @@ def test_every_section_and_figure(full_html):
     page = Page(full_html)
     for sid in (*SECTIONS, "validation", "null-space", "parameter-table"):
         assert sid in page.ids, sid
-    # per fit log: Fig. 13 and inputs; singular values, parameter correlation (issue 17),
-    # histograms, residual vs velocity, residual autocorrelation (issue 14); one observer view
-    # per validation log
-    check_images(page, 2 * 2 + 5 + 1)
-    assert len(page.all("figcaption")) == 10
+    # per fit log: Fig. 13 and inputs; the first log's predicted velocity, singular values,
+    # parameter correlation (issue 17), histograms, residual vs velocity, residual
+    # autocorrelation (issue 14); one observer view per validation log
+    check_images(page, 2 * 2 + 6 + 1)
+    assert len(page.all("figcaption")) == 11
     text = " ".join(page.text)
     for phrase in ("RMS translation", "RMS rotation", "Condition number", "Input delay",
                    "Friction model", "per-wheel", "Smoother span", "Rank",
@@ -260,7 +260,7 @@ def test_written_atomically_without_compare_or_validation(sim, tmp_path):
     assert "validation" not in page.ids
     assert all(s in page.ids for s in SECTIONS)
     check_self_contained(page)
-    check_images(page, 2 * 2 + 5)  # + residual autocorrelation, correlation matrix
+    check_images(page, 2 * 2 + 6)  # + autocorrelation, correlation, prediction
     assert "Δ/σ" not in html
 
 
@@ -295,7 +295,7 @@ def test_report_command(files):
     html = out.read_text(encoding="utf-8")
     page = Page(html)
     check_self_contained(page)
-    check_images(page, 2 * 2 + 5 + 1)  # + residual autocorrelation, correlation
+    check_images(page, 2 * 2 + 6 + 1)  # + autocorrelation, correlation, prediction
     assert {*SECTIONS, "validation"} <= page.ids
     assert "<script" not in html.lower()  # the log's file name holds <script>
     assert "&lt;script&gt;alert(1)&lt;script&gt;" in html
@@ -310,7 +310,7 @@ def test_fit_with_report(files):
     assert r.exit_code == 0, r.output
     page = Page(out.read_text(encoding="utf-8"))
     assert {*SECTIONS, "validation"} <= page.ids
-    check_images(page, 2 * 2 + 5 + 1)  # two logs fitted (a 6 s log alone is too short)
+    check_images(page, 2 * 2 + 6 + 1)  # two logs fitted (a 6 s log alone is too short)
     assert "truth.json" in " ".join(page.text)
 
 

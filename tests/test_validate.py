@@ -38,3 +38,24 @@ def test_clean_run_stays_below_the_thresholds(off_square, truth, runs_off_square
     assert v.share_above == {"force": 0.0, "torque": 0.0}
     assert v.observer_max["F_bx"] < 5 and v.observer_max["T_bz"] < 2
     assert v.rms["translation"] < 0.5
+
+
+def test_the_models_predicted_velocity_and_its_fit_percentage(off_square, truth,
+                                                              runs_off_square):
+    """The true parameters predict the measured base velocity under the measured torques to
+    over 99 % (MATLAB compare's fit) on an exact run; doubled masses and inertias do not."""
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.params import Parameters
+    from ropod_sysid.regressor import preprocess
+    from ropod_sysid.validate import fit_percentage, predicted_velocity
+
+    pre = preprocess(runs_off_square[0].log, off_square, input_delay=0.0005)
+    i = slice(pre.trim, len(pre.t) - pre.trim)
+    state = (pre.q[i], pre.qdd[i], pre.angles[i], pre.angle_rates[i], pre.tau[i])
+    model = PlatformModel(off_square)
+    good = fit_percentage(pre.qd[i], predicted_velocity(model, truth, pre.t[i], pre.qd[i], state))
+    heavy = Parameters({k: (2 * v if k in ("m_b", "Jzz_b") else v) for k, v in truth.items()})
+    bad = fit_percentage(pre.qd[i], predicted_velocity(model, heavy, pre.t[i], pre.qd[i], state))
+    assert np.all(good > 99.0), good
+    assert np.all(bad < good - 5.0), (good, bad)
+    assert fit_percentage(pre.qd[i], pre.qd[i]).tolist() == [100.0, 100.0, 100.0]

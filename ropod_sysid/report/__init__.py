@@ -67,7 +67,14 @@ from ropod_sysid.summary import (
     model_error_ratio,
     relative_std,
 )
-from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_logs
+from ropod_sysid.validate import (
+    FORCE_THRESHOLD,
+    PREDICTION_WINDOW_S,
+    TORQUE_THRESHOLD,
+    fit_percentage,
+    predicted_velocity,
+    validate_logs,
+)
 
 __all__ = ["read_comparison", "render_fit_report", "result_from_parameter_file",
            "write_fit_report"]
@@ -226,6 +233,8 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
     """
     platform = result.platform
     opts = result.options
+    model = PlatformModel(platform)
+    params = result.fitted_parameters()
     views, errs, vels = [], [], []
     series: list[tuple[np.ndarray, np.ndarray]] = []
     fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.layout)
@@ -244,6 +253,13 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         series.append((plot.t_rows, err))
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
+        predicted = None
+        if plot.state_rows is not None and len(plot.t_rows) > 2:
+            predicted = predicted_velocity(model, params, plot.t_rows, plot.qd_rows,
+                                           plot.state_rows)
+        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(plot.qd_rows,
+                                                                          predicted)),
+                            strict=True)) if predicted is not None else None)
         views.append({
             "index": k,
             "id": f"log-{k + 1}",
@@ -263,6 +279,10 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "inputs": _png_uri(inputs_figure.render(plot)),
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
+            "fit_pct": fit_pct,
+            "prediction": (_png_uri(figures.predicted_velocity(
+                plot.t_rows, plot.qd_rows, predicted, fit_pct, PREDICTION_WINDOW_S))
+                if predicted is not None and k == 0 else None),
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
@@ -404,6 +424,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
                                                       result.options.rcond)),
         "null_space": sol.null_space_text(),
         "corr_figure": _png_uri(figures.correlation_matrix(sol.names, sol.covariance)),
+        "prediction_window": PREDICTION_WINDOW_S,
         "combinations": [(k, v) for k, v in sol.combinations.items()],
         "hist_figure": _png_uri(figures.residual_histograms(all_err)),
         "vel_figure": _png_uri(figures.residual_vs_velocity(all_vel, all_err)),

@@ -335,6 +335,28 @@ def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:
         return _png(fig)
 
 
+def predicted_velocity(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray,
+                       fit_pct: dict[str, float] | None, window: float) -> bytes:
+    """Measured base velocity (grey) against the fitted model's prediction under the measured
+    torques (blue), restarted every ``window`` seconds, per world axis."""
+    labels = ("ẋ_b [m/s]", "ẏ_b [m/s]", "θ̇_b [rad/s]")
+    keys = ("x", "y", "theta")
+    with _style():
+        fig = _figure(10.0, 5.2, top=0.94, bottom=0.09, left=0.08, hspace=0.35)
+        axes = [fig.add_subplot(3, 1, d + 1) for d in range(3)]
+        for d, ax in enumerate(axes):
+            _line(ax, t, measured[:, d], color=GREY, lw=1.2, label="measured")
+            _line(ax, t, predicted[:, d], color=BLUE, lw=0.8, label="model")
+            ax.set_ylabel(labels[d])
+            pct = "" if fit_pct is None else f"  fit {fit_pct[keys[d]]:.1f} %"
+            _title(ax, f"{keys[d]}{pct}")
+            for x0 in np.arange(t[0], t[-1], window):
+                ax.axvline(x0, color="#cccccc", lw=0.5, zorder=0)
+        axes[0].legend(loc="upper right", fontsize=8, ncols=2)
+        axes[-1].set_xlabel("t [s]")
+        return _png(fig)
+
+
 def correlation_matrix(names: Sequence[str], covariance: np.ndarray) -> bytes:
     """The correlation of the fitted parameters, cov_ij / √(cov_ii cov_jj) in [−1, 1] (grey:
     fixed, or determined only in combination); |r| ≥ 0.9 written in the cell."""
