@@ -18,7 +18,7 @@ from ropod_sysid.cli.common import (
     writes,
 )
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, FitResult, fit_files
+from ropod_sysid.fit import ROBUST_METHODS, FitOptions, FitResult, fit_files
 from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
@@ -101,13 +101,15 @@ def parse_row_step(text: str) -> int | None:
 
 def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
                 weight_rotation: str, physical: bool, input_delay: str, rcond: float,
-                row_step: str = "auto", split_gaps: bool = False) -> FitOptions:
+                row_step: str = "auto", split_gaps: bool = False,
+                robust: str = "none") -> FitOptions:
     sp = Span.parse(span)
     return FitOptions(friction=friction,  # type: ignore[arg-type]
                       span=sp, fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
                       physical=physical, input_delay=parse_delay(input_delay, sp),  # type: ignore
-                      rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps)
+                      rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps,
+                      robust=robust)  # type: ignore[arg-type]
 
 
 def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span: Span | None,
@@ -156,6 +158,12 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               help="auto (Sec. VI-A), none, or a number.")
 @click.option("--physical", is_flag=True,
               help="Physically consistent fit (bounded least squares); RMS cost reported.")
+@click.option("--robust", type=click.Choice(ROBUST_METHODS), default="none",
+              show_default=True,
+              help="Iteratively reweighted least squares over 2 s stretches of the logs, for "
+                   "logs with bumps or collisions. huber: a stretch whose RMS residual is above "
+                   "2× the median counts less; bisquare: from there, a stretch beyond 4.7× "
+                   "drops out. Needs at least 12 s of log.")
 @click.option("--input-delay", default="0", show_default=True,
               help="Lag of the motion behind the logged torque: seconds, at most one span "
                    "either way (negative: the motion leads the logged torque), or auto "
@@ -181,7 +189,7 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, node_name: str,
             friction: str,
             span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
-            physical: bool,
+            physical: bool, robust: str,
             input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
             validate_logs: tuple[str, ...], split_gaps: bool, workers: int | None,
             dask_address: str | None, quiet: bool) -> None:
@@ -191,7 +199,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                          row_step, split_gaps)
+                          row_step, split_gaps, robust)
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", node_name):
         raise InputError(f"--node-name {node_name!r}: a ROS 2 node name has letters, digits and "
                          "underscores and does not start with a digit, e.g. ropod_dynamic_model")

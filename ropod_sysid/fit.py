@@ -44,6 +44,7 @@ from ropod_sysid.regressor import (
 )
 from ropod_sysid.solve import (
     RCOND,
+    STRETCH_S,
     Solution,
     Triangles,
     check_fixed,
@@ -75,6 +76,7 @@ class FitOptions:
     max_delay: float = 0.02  # --input-delay auto searches ±this (at most one span) [s]
     row_step: int | None = None  # samples between equation rows; None: ~10 per span
     split_gaps: bool = False  # fit the pieces between gaps in time as separate logs
+    robust: Robust = "none"  # down-weight stretches with bumps (huber) or collisions (bisquare)
 
     def __post_init__(self) -> None:
         """Nonsense values are a one-line :class:`InputError` before any work."""
@@ -82,6 +84,8 @@ class FitOptions:
         if self.input_delay != "auto":
             check_input_delay(float(self.input_delay),
                               self.span.value if self.span.seconds else None)
+        if self.robust not in ROBUST_METHODS:
+            raise InputError(f"--robust {self.robust!r}: use {', '.join(ROBUST_METHODS)}")
         if not (math.isfinite(self.max_delay) and self.max_delay > 0):
             raise InputError(f"max_delay {self.max_delay:g}: must be a finite number of "
                              "seconds > 0")
@@ -139,6 +143,48 @@ class FitResult:
         parameters, e.g. to validate them on other logs."""
         return DynamicParameters.from_vector(self.shown.values, self.solution.names)
 
+    def down_weighted(self) -> list[tuple[str, float, float, float]]:
+        """``--robust``'s stretches weighted below :data:`DOWN_WEIGHTED`: (log, start, end [s
+        from the log's first row], weight), by weight; empty for a plain fit."""
+        w = self.solution.stretch_weights
+        if w is None:
+            return []
+        out = []
+        k = 0
+        for lf in self.logs:
+            count = sum(block.shape[0] for block in lf.triangles.stretches)
+            for i in np.flatnonzero(w[k:k + count] < DOWN_WEIGHTED):
+                out.append((lf.source, STRETCH_S * i, min(STRETCH_S * (i + 1),
+                            lf.triangles.duration), float(w[k + i])))
+            k += count
+        return sorted(out, key=lambda item: item[3])
+
+    def robust_account(self) -> dict[str, object]:
+        """What ``--robust`` did, for the parameter file's extras."""
+        w = self.solution.stretch_weights
+        assert w is not None
+        c = BISQUARE_C if self.options.robust == "bisquare" else HUBER_C
+        return {"method": self.options.robust, "c": c, "stretch_s": STRETCH_S,
+                "stretches": int(w.size),
+                "down_weighted": [{"file": f, "from_s": a, "to_s": b, "weight": round(x, 4)}
+                                  for f, a, b, x in self.down_weighted()]}
+
+    def robust_text(self) -> str:
+        """One line on what ``--robust`` did ('' for a plain fit)."""
+        w = self.solution.stretch_weights
+        if w is None:
+            return ""
+        low = self.down_weighted()
+        where = "; ".join(f"{f} {a:.0f}–{b:.0f} s ({x:.2f})" for f, a, b, x in low[:5])
+        more = f"; … {len(low) - 5} more" if len(low) > 5 else ""
+        rule = (f"bisquare weights, 0 beyond {BISQUARE_C:g}× the median RMS residual"
+                if self.options.robust == "bisquare" else
+                f"Huber weights, below 1 above {HUBER_C:g}× the median RMS residual")
+        return (f"--robust {self.options.robust}: {len(low)} of {w.size} stretches of "
+                f"{STRETCH_S:g} s weighted below {DOWN_WEIGHTED:g} ({rule}; the smallest "
+                f"{w.min():.2f})"
+                + (f": {where}{more}" if low else ""))
+
     def parameter_file(self) -> ParameterFile:
         """The controller's parameter file (``docs/file-formats.md``), with the fit's account in
         extras."""
@@ -164,6 +210,7 @@ class FitResult:
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
             **({"split_gaps": True} if self.options.split_gaps else {}),
+            **({"robust": self.robust_account()} if sol.stretch_weights is not None else {}),
             "std_basis": shown.std_basis,
             "std_white_noise": {n: None if not np.isfinite(v) else float(v)
                                 for n, v in zip(sol.names, shown.std_white, strict=True)},
@@ -310,9 +357,96 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
     weights = _weights(systems, options.weight_rotation)
     r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
     rows = 3 * sum(s.equations for s in systems)
-    return solve(r, rows, names, options.fix, options.rcond,
-                 correlation=mean_correlation(systems),
-                 stretches=weighted_stretches(systems, weights) if calibrate else None), weights
+    robust = options.robust != "none" and calibrate
+    stretches = weighted_stretches(systems, weights) if calibrate else None
+    sol = solve(r, rows, names, options.fix, options.rcond,
+                correlation=mean_correlation(systems), stretches=stretches)
+    if robust:
+        if stretches is None or len(stretches) < MIN_ROBUST_STRETCHES:
+            raise InputError(f"--robust {options.robust} needs at least {MIN_ROBUST_STRETCHES} "
+                             f"stretches of {STRETCH_S:g} s of log; give longer logs or leave "
+                             "it out")
+        sol = robust_solve(sol, stretches, rows, names, options, mean_correlation(systems))
+    return sol, weights
+
+
+MIN_ROBUST_STRETCHES = 6
+HUBER_C = 2.0  # Huber: a stretch whose RMS residual exceeds HUBER_C × the median's counts less
+BISQUARE_C = 4.685  # bisquare: a stretch beyond BISQUARE_C × the median's counts not at all
+ROBUST_ITERATIONS = 50
+DOWN_WEIGHTED = 0.5  # a stretch weighted below this is listed as down-weighted
+Robust = Literal["none", "huber", "bisquare"]
+ROBUST_METHODS: tuple[str, ...] = ("none", "huber", "bisquare")
+
+
+def stretch_rms(values: np.ndarray, stretches: np.ndarray) -> np.ndarray:
+    """The root of each stretch's residual sum of squares at ``values``: zᵀ G_k z with
+    z = (m, −1) and G_k the stretch's Gram matrix of [A | b] (K,)."""
+    z = np.append(values, -1.0)
+    return np.sqrt(np.maximum(np.einsum("i,kij,j->k", z, stretches, z), 0.0))
+
+
+def robust_scale(rms: np.ndarray) -> float:
+    """The median of the stretches' positive RMS residuals (a stretch at rest has none): a
+    robust scale, which a few spoiled stretches do not move."""
+    positive = rms[rms > 0]
+    return float(np.median(positive)) if positive.size else 1.0
+
+
+def huber_weights(rms: np.ndarray, scale: float, c: float = HUBER_C) -> np.ndarray:
+    """Huber's weights w_k = min(1, c·s / r_k) on the stretches' RMS residuals r_k, s the
+    scale (:func:`robust_scale`): a stretch's influence is bounded by c times a typical one's."""
+    return np.minimum(1.0, c * scale / np.maximum(rms, 1e-300))
+
+
+def bisquare_weights(rms: np.ndarray, scale: float, c: float | None = None) -> np.ndarray:
+    """Tukey's bisquare weights w_k = (1 − (r_k / c s)²)² for r_k < c s, else 0: a stretch
+    far beyond the others (a collision) drops out of the fit; c = :data:`BISQUARE_C` unless
+    given."""
+    u = np.minimum(rms / ((BISQUARE_C if c is None else c) * scale), 1.0)
+    return (1.0 - u * u) ** 2
+
+
+def gram_triangle(gram: np.ndarray) -> np.ndarray:
+    """An upper triangle R with RᵀR = ``gram`` (p+1, p+1), from its eigen-decomposition so that
+    a semi-definite Gram matrix (a rank-deficient problem) keeps its null space."""
+    lam, vec = np.linalg.eigh(0.5 * (gram + gram.T))
+    return np.linalg.qr(np.sqrt(np.maximum(lam, 0.0))[:, None] * vec.T, mode="r")
+
+
+def robust_solve(sol: Solution, stretches: np.ndarray, rows: int, names: Sequence[str],
+                 options: FitOptions, correlation: float) -> Solution:
+    """``--robust``: iteratively reweighted least squares over the logs' 2 s stretches
+    (:data:`STRETCH_S`), the weights a function of a stretch's RMS residual over the median's.
+    ``huber`` (:func:`huber_weights`) is convex: one solution, a bump's influence bounded.
+    ``bisquare`` (:func:`bisquare_weights`) starts from Huber's solution and redescends: a
+    collision's stretches drop out; the weight scale is held at Huber's. Each step reduces the
+    weighted normal equations Σ w_k G_k to a triangle (:func:`gram_triangle`) and solves as the
+    fit solves; the jackknife σ comes from the weighted stretches, the row count from the
+    weights' sum. A phase ends when no weight moves by 1e-6 (at most
+    :data:`ROBUST_ITERATIONS` steps); the weights are kept in ``Solution.stretch_weights``."""
+    w = np.ones(len(stretches))
+    phases = ["huber"] + (["bisquare"] if options.robust == "bisquare" else [])
+    scale = robust_scale(stretch_rms(sol.values, stretches))
+    for phase in phases:
+        for _ in range(ROBUST_ITERATIONS):
+            rms = stretch_rms(sol.values, stretches)
+            if phase == "huber":
+                scale = robust_scale(rms)
+                new = huber_weights(rms, scale)
+            else:
+                new = bisquare_weights(rms, scale)
+            if np.max(np.abs(new - w)) < 1e-6:
+                break
+            w = new
+            weighted = w[:, None, None] * stretches
+            sol = solve(gram_triangle(weighted.sum(axis=0)), max(1, round(rows * w.mean())),
+                        names, options.fix, options.rcond, correlation=correlation,
+                        stretches=weighted)
+    sol.stretch_weights = w
+    sol.std_basis += (f"; the stretches weighted by --robust {options.robust}, the weights taken "
+                      "as given")
+    return sol
 
 
 def weighted_stretches(systems: Sequence[Triangles], weights: Sequence[float],
@@ -488,9 +622,14 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
                        combined_rms(systems, solution.values), delay)
     if options.physical:
         r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
-        result.physical = solve(r, 3 * sum(s.equations for s in systems), names, options.fix,
+        rows = 3 * sum(s.equations for s in systems)
+        stretches = weighted_stretches(systems, weights)
+        if solution.stretch_weights is not None and stretches is not None:  # --robust
+            stretches = solution.stretch_weights[:, None, None] * stretches
+            r = gram_triangle(stretches.sum(axis=0))
+            rows = max(1, round(rows * solution.stretch_weights.mean()))
+        result.physical = solve(r, rows, names, options.fix,
                                 options.rcond, bounds=physical_bounds(names),
-                                correlation=mean_correlation(systems),
-                                stretches=weighted_stretches(systems, weights))
+                                correlation=mean_correlation(systems), stretches=stretches)
         result.physical_rms = combined_rms(systems, result.physical.values)
     return result

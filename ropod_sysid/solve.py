@@ -257,6 +257,7 @@ class Solution:
     covariance: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0)))
     std_white: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
     std_basis: str = "white noise"
+    stretch_weights: np.ndarray | None = field(default=None, repr=False)  # --robust huber
     at_bound: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0, dtype=bool))
     note: str = ""  # e.g. a bounded fit of a rank-deficient system chose one point of a set
 

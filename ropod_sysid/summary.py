@@ -155,6 +155,8 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
         for note in lf.notes:
             lines.append(f"    note: {note}")
     lines.append(f"std: {sol.std_basis}")
+    if result.robust_text():
+        lines.append(result.robust_text())
     if sol.note:
         lines.append(f"note: {sol.note}")
     sol = result.solution

@@ -34,6 +34,8 @@ import numpy as np
 from ropod_sysid import __version__
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import (
+    MIN_ROBUST_STRETCHES,
+    ROBUST_METHODS,
     FitOptions,
     FitResult,
     LogFit,
@@ -119,8 +121,11 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     if isinstance(extra_fixed, dict):
         fixed.update({str(k): float(v) for k, v in extra_fixed.items()
                       if str(k) in names and isinstance(v, int | float)})
+    robust_extra = pfile.extras.get("robust")
+    robust = str(robust_extra.get("method")) if isinstance(robust_extra, dict) \
+        and robust_extra.get("method") in ROBUST_METHODS else "none"
     options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
-                         row_step=row_step)
+                         row_step=row_step, robust=robust)  # type: ignore[arg-type]
 
     check_distinct([log for log in logs if not isinstance(log, Log)])
     for log in logs:
@@ -132,6 +137,11 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
                                       split_gaps=split_gaps, plot=True)
             bar.update(1)
     systems = [res.triangles for res in streamed]
+    if robust != "none" and sum(len(st) for s in systems for st in s.stretches) \
+            < MIN_ROBUST_STRETCHES:
+        notes.append(f"the parameter file's fit was robust (--robust {robust}); these logs are too "
+                     "short to weigh their stretches, so the comparison fit is a plain one")
+        options = dataclasses.replace(options, robust="none")
     sol, weights = fit_systems(systems, names, options)
 
     m = np.array([values.get(k, 0.0) for k in names])
@@ -398,6 +408,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "std_basis": result.shown.std_basis,
         "model_error_ratio": model_error_ratio(result),
         "physical_note": result.shown.note,
+        "robust_note": result.robust_text(),
         "span": str(result.options.span),
         "friction": result.options.friction,
         "rms": rms,
