@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 
@@ -214,28 +215,38 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     compare: ParameterFile | None = None
     compare_label: str | None = None
     if compare_path is not None or report_path is not None:
-        # the report module (and matplotlib) only when needed: keeps a plain fit quick
-        from ropod_sysid.report import read_comparison, write_fit_report
+        # the report module only when needed: keeps a plain fit quick
+        from ropod_sysid.report import read_comparison
 
         compare, compare_label = read_comparison(compare_path, None, platform)
-    # with --report, the fit's pass also gathers what the report draws: no second reading
-    result = fit_files(list(logs), platform, options, workers=workers,
-                       dask_address=dask_address, quiet=quiet, plots=report_path is not None)
-    check_enough(result, logs)
-    write_parameter_file(result.parameter_file(), out_path, fmt, platform,  # type: ignore[arg-type]
-                         node_name=node_name)
-    validation = None
-    if validate_logs and report_path is None:
-        validation = validate_sources(list(validate_logs), platform, result.fitted_parameters(),
-                                      options.span, result.input_delay, workers=workers,
-                                      dask_address=dask_address, row_step=options.row_step,
-                                      quiet=quiet, split_gaps=split_gaps)
-    if report_path is not None:
-        write_fit_report(result, None, report_path, compare=compare, compare_label=compare_label,
-                         validation_logs=pieces_of(validate_logs, platform, split_gaps,
-                                                   options.span, options.row_step))
-        say(f"wrote {report_path}")
-        compare = None  # shown in the report
+    with contextlib.ExitStack() as stack:
+        painter = None
+        if report_path is not None:  # its workers load matplotlib while the fit reads the logs
+            from ropod_sysid.report.painter import Painter
+
+            painter = stack.enter_context(Painter(layout=platform.layout))
+        # with --report, the fit's pass also gathers what the report draws: no second reading
+        result = fit_files(list(logs), platform, options, workers=workers,
+                           dask_address=dask_address, quiet=quiet, plots=painter is not None)
+        check_enough(result, logs)
+        write_parameter_file(result.parameter_file(), out_path, fmt, platform,  # type: ignore[arg-type]
+                             node_name=node_name)
+        validation = None
+        if validate_logs and report_path is None:
+            validation = validate_sources(list(validate_logs), platform,
+                                          result.fitted_parameters(), options.span,
+                                          result.input_delay, workers=workers,
+                                          dask_address=dask_address, row_step=options.row_step,
+                                          quiet=quiet, split_gaps=split_gaps)
+        if report_path is not None:
+            from ropod_sysid.report import write_fit_report
+
+            write_fit_report(result, None, report_path, compare=compare,
+                             compare_label=compare_label, painter=painter,
+                             validation_logs=pieces_of(validate_logs, platform, split_gaps,
+                                                       options.span, options.row_step))
+            say(f"wrote {report_path}")
+            compare = None  # shown in the report
     if not quiet or compare is not None:  # --compare without --report: the table is its output
         click.echo(format_fit(result, compare, compare_label))
     if validation is not None:

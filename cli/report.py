@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
 from ropod_sysid.cli.common import (
@@ -18,6 +20,10 @@ from ropod_sysid.fit import fit_settings
 from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
+
+if TYPE_CHECKING:
+    from ropod_sysid.platform import Platform
+    from ropod_sysid.report.painter import Painter
 
 
 @click.command("report", short_help="Write the HTML report of a parameter file on logs (no refit).")
@@ -49,9 +55,22 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     No refit: the values and standard deviations are the file's; residuals, singular values,
     rank and null space are computed on LOGS.
     """
-    from ropod_sysid.report import read_comparison, result_from_parameter_file, write_fit_report
+    from ropod_sysid.report.painter import Painter
 
     platform = load_platform(platform_path)
+    with Painter(layout=platform.layout) as painter:  # drawing starts while the logs are read
+        _report(platform, logs, params_path, out_path, compare_path, validate_paths, span,
+                split_gaps, quiet, painter)
+    if not quiet:
+        click.echo(f"wrote {out_path}", err=True)
+
+
+def _report(platform: Platform, logs: tuple[str, ...], params_path: str, out_path: str,
+            compare_path: str | None, validate_paths: tuple[str, ...], span: Span | None,
+            split_gaps: bool, quiet: bool, painter: Painter) -> None:
+    """The report command's work, its figures drawn by ``painter``."""
+    from ropod_sysid.report import read_comparison, result_from_parameter_file, write_fit_report
+
     pfile = read_parameter_file(params_path)
     # a fit's parameter file, or a flat name → value mapping (a simulation's truth)
     compare, compare_label = read_comparison(compare_path, None, platform)
@@ -62,6 +81,5 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
                                                where=params_path, split_gaps=split_gaps,
                                                quiet=quiet)
     write_fit_report(result, None, out_path, compare=compare, compare_label=compare_label,
-                     validation_logs=validation, params_source=params_path, notes=notes)
-    if not quiet:
-        click.echo(f"wrote {out_path}", err=True)
+                     validation_logs=validation, params_source=params_path, notes=notes,
+                     painter=painter)

@@ -17,7 +17,6 @@ non-uniform sample positions.
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft as sp_fft
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import ndimage
 
@@ -234,6 +233,8 @@ def _interior(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 def _overlap_save(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """``valid`` convolution of each column of ``y2`` (N, m) with ``kernel`` (k,) by FFT over
     segments of about :data:`_SEGMENT_KERNELS` kernel lengths: ``(N-k+1, m)``, O(N log k)."""
+    import scipy.fft as sp_fft  # here: loading it costs a short fit 0.2 s
+
     n, m = y2.shape
     k = kernel.size
     size = sp_fft.next_fast_len(max(_SEGMENT_KERNELS * k, 256), real=True)

@@ -412,3 +412,28 @@ def test_report_command_compares_with_a_flat_truth_mapping(files, tmp_path):
             d / "params.json", "--out", out, "--compare", flat, "--quiet")
     assert r.exit_code == 0, r.output
     assert "flat_truth.json" in out.read_text(encoding="utf-8")
+
+
+def test_figures_drawn_by_workers_are_those_drawn_here(sim, truth_file, full_html):
+    """The report's figures drawn by two forked workers (the default on two CPUs) and in this
+    process are the same bytes; a figure that fails in a worker fails the report, with the
+    worker's error, and ends the workers."""
+    from ropod_sysid.report import painter
+
+    platform, _, logs, result = sim
+    here = render_fit_report(result, logs[:2], compare=truth_file, compare_label="truth.json",
+                             validation_logs=[logs[2]], workers=1)
+    assert here == full_html
+    if "fork" not in __import__("multiprocessing").get_all_start_methods():
+        pytest.skip("no fork here: the figures are drawn in this process")
+    two = render_fit_report(result, logs[:2], compare=truth_file, compare_label="truth.json",
+                            validation_logs=[logs[2]], workers=2)
+    assert two == here
+    with painter.Painter(2) as p:
+        drawn = p.draw("residual_histograms", "not an array")
+        with pytest.raises(Exception, match="not an array|index|dimension|shape|str"):
+            drawn.uri()
+        pool = p.pool
+    assert p.pool is None and pool is not None
+    with pytest.raises(ValueError, match="workers 0: at least 1"):
+        painter.Painter(0)

@@ -20,7 +20,6 @@ fit, its error, histograms and the error against velocity) and decimated for dra
 
 from __future__ import annotations
 
-import base64
 import dataclasses
 import math
 from collections.abc import Sequence
@@ -58,7 +57,7 @@ from ropod_sysid.params import (
 from ropod_sysid.platform import Platform
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
-from ropod_sysid.report import figures
+from ropod_sysid.report.painter import Drawn, Painter
 from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
@@ -219,10 +218,6 @@ def _short(source: str) -> str:
     return Path(source).name or source
 
 
-def _png_uri(data: bytes) -> str:
-    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
-
-
 def _verdict_class(text: str) -> str:
     if text.startswith("well"):
         return "good"
@@ -232,7 +227,7 @@ def _verdict_class(text: str) -> str:
 
 
 def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
-               ) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
+               painter: Painter) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
                           list[tuple[np.ndarray, np.ndarray]]]:
     """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
     per log its kept rows' times and errors.
@@ -247,7 +242,6 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
     params = result.fitted_parameters()
     views, errs, vels = [], [], []
     series: list[tuple[np.ndarray, np.ndarray]] = []
-    fit_figure, inputs_figure = figures.FitFigure(), figures.InputsFigure(platform.layout)
     for k, lf in enumerate(result.logs):
         plot = lf.plot
         if plot is None:
@@ -284,15 +278,15 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "notes": list(lf.notes),
             "span_samples": plot.span_samples,
             "row_step": plot.row_step,
-            "fig13": _png_uri(fit_figure.render(plot.t_rows, plot.b_rows, fit,
-                                                [rms["x"], rms["y"], rms["theta"]])),
-            "inputs": _png_uri(inputs_figure.render(plot)),
+            "fig13": painter.draw("fit_vs_measured", plot.t_rows, plot.b_rows, fit,
+                                  [rms["x"], rms["y"], rms["theta"]]),
+            "inputs": painter.draw("inputs", plot, platform.layout),
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
             "fit_pct": fit_pct,
-            "prediction": (_png_uri(figures.predicted_velocity(
-                plot.t_rows, plot.qd_rows, predicted, fit_pct, PREDICTION_WINDOW_S))
-                if predicted is not None and k == 0 else None),
+            "prediction": (painter.draw("predicted_velocity", plot.t_rows, plot.qd_rows,
+                                        predicted, fit_pct, PREDICTION_WINDOW_S)
+                           if predicted is not None and k == 0 else None),
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
@@ -346,7 +340,8 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
                       validation_logs: Sequence[Log] | None = None,
                       params_source: str | None = None,
                       notes: Sequence[str] = (),
-                      title: str | None = None) -> str:
+                      title: str | None = None, workers: int | None = None,
+                      painter: Painter | None = None) -> str:
     """The report of ``result`` on ``logs`` (the fit's logs, in the fit's order) as HTML.
 
     ``logs`` (in-memory logs or files) are streamed once for the figures only when the result
@@ -357,7 +352,24 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     validation_logs : logs the fit was not fitted on: residual RMS and disturbance observer
     params_source : where the values come from when the result was rebuilt from a file
     notes : further remarks for the reader (shown in the summary)
+    workers : processes that draw the figures (:func:`ropod_sysid.report.painter.
+        default_workers`: 2 on a machine with two CPUs or more; 1 draws them in this process)
+    painter : a :class:`ropod_sysid.report.painter.Painter` already started (e.g. before the
+        logs were read, so that its workers load matplotlib meanwhile); ``workers`` is then
+        ignored
     """
+    if painter is not None:
+        return _render(result, logs, painter, compare, compare_label, validation_logs,
+                       params_source, notes, title)
+    with Painter(workers, result.platform.layout) as own:
+        return _render(result, logs, own, compare, compare_label, validation_logs,
+                       params_source, notes, title)
+
+
+def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
+            compare: str | Path | ParameterFile | None, compare_label: str | None,
+            validation_logs: Sequence[Log] | None, params_source: str | None,
+            notes: Sequence[str], title: str | None) -> str:
     if logs is not None and len(logs) != len(result.logs):
         raise InputError(f"the report needs the fit's {len(result.logs)} log(s), got "
                          f"{len(logs)}")
@@ -369,7 +381,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     rms = result.physical_rms if result.physical_rms is not None else result.rms
     verdict = identifiability_verdict(result)
 
-    log_views, all_err, all_vel, series = _log_views(result, logs, shown)
+    log_views, all_err, all_vel, series = _log_views(result, logs, shown, painter)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
 
@@ -384,8 +396,8 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
                 "rms": v.rms, "observer_rms": v.observer_rms, "observer_max": v.observer_max,
                 "share_above": v.share_above,
                 "alarm": v.share_above["force"] > 0 or v.share_above["torque"] > 0,
-                "figure": _png_uri(figures.observer(v.t, v.f_hat, FORCE_THRESHOLD,
-                                                    TORQUE_THRESHOLD)),
+                "figure": painter.draw("observer", v.t, v.f_hat, FORCE_THRESHOLD,
+                                       TORQUE_THRESHOLD),
             })
 
     warnings = []
@@ -431,19 +443,30 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
         "only_other": only_other,
         "n_implausible": n_implausible,
         "n_combination": int(np.sum(sol.combination)),
-        "sv_figure": _png_uri(figures.singular_values(sol.singular_values, sol.rank,
-                                                      result.options.rcond)),
+        "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
+                                  result.options.rcond),
         "null_space": sol.null_space_text(),
-        "corr_figure": _png_uri(figures.correlation_matrix(sol.names, sol.covariance)),
+        "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
         "prediction_window": PREDICTION_WINDOW_S,
         "combinations": [(k, v) for k, v in sol.combinations.items()],
-        "hist_figure": _png_uri(figures.residual_histograms(all_err)),
-        "vel_figure": _png_uri(figures.residual_vs_velocity(all_vel, all_err)),
-        "acf_figure": _png_uri(figures.residual_autocorrelation(series, STRETCH_S)),
+        "hist_figure": painter.draw("residual_histograms", all_err),
+        "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),
+        "acf_figure": painter.draw("residual_autocorrelation", series, STRETCH_S),
         "validation": validation,
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
     }
-    return _environment().get_template("report.html").render(**context)
+    return _environment().get_template("report.html").render(**_drawn(context))
+
+
+def _drawn(value: Any) -> Any:
+    """``value`` with every figure being drawn (:class:`Drawn`) replaced by its URI."""
+    if isinstance(value, Drawn):
+        return value.uri()
+    if isinstance(value, dict):
+        return {k: _drawn(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_drawn(v) for v in value]
+    return value
 
 
 def _unit_groups(platform: Platform) -> list[dict[str, Any]]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 import numpy as np
@@ -219,10 +219,16 @@ class FitFigure:
         return _redraw(self.fig, self.axes)
 
 
+_BUILT: dict[Any, Any] = {}  # this process's figures built once and redrawn (FitFigure, …)
+
+
 def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray,
                     rms: Sequence[float] | None = None) -> bytes:
-    """:class:`FitFigure` of one log."""
-    return FitFigure().render(t, b, fit, rms)
+    """:class:`FitFigure` of one log (the figure built once per process)."""
+    fig = _BUILT.get(FitFigure)
+    if fig is None:
+        fig = _BUILT[FitFigure] = FitFigure()
+    return fig.render(t, b, fit, rms)
 
 
 class InputsFigure:
@@ -305,8 +311,26 @@ class InputsFigure:
 
 
 def inputs(plot: LogPlot, layout: Layout) -> bytes:
-    """:class:`InputsFigure` of one log."""
-    return InputsFigure(layout).render(plot)
+    """:class:`InputsFigure` of one log (the figure built once per process and layout)."""
+    key = (InputsFigure, tuple(layout.columns()))
+    fig = _BUILT.get(key)
+    if fig is None:
+        fig = _BUILT[key] = InputsFigure(layout)
+    return fig.render(plot)
+
+
+def warm(layout: Layout | None = None) -> None:
+    """Build and draw once the figures a report redraws per log (fonts loaded, ticks laid
+    out), e.g. in a drawing process while the logs are still being read."""
+    fig = _BUILT.get(FitFigure)
+    if fig is None:
+        fig = _BUILT[FitFigure] = FitFigure()
+    with _style():
+        _png(fig.fig)
+    if layout is not None:
+        key = (InputsFigure, tuple(layout.columns()))
+        if key not in _BUILT:
+            _BUILT[key] = InputsFigure(layout)
 
 
 def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:
