@@ -95,6 +95,47 @@ def _write_variants(traj: Any, out: str) -> list[Path]:
     return written
 
 
+def sensor_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    """The sensor model of the logs a run will give (:class:`ropod_sysid.trajectory.noise.
+    SensorNoise`)."""
+    for option in reversed([
+        click.option("--current-noise", type=Number(0, 100, unit="A"), default=None,
+                     help="σ of each motor-current sample [A] [default with a sensor model: "
+                          "0.03]."),
+        click.option("--encoder-counts", type=Number(16, 2**40, integer=True), default=None,
+                     help="Counts per revolution of the wheel and pivot encoders [default "
+                          "with a sensor model: 16384]."),
+        click.option("--exact-encoders", is_flag=True,
+                     help="Encoders without quantisation (only current noise)."),
+        click.option("--log-rate", default=100.0, show_default=True, type=positive("Hz"),
+                     help="Sample rate of the logs the fit will use [Hz]."),
+    ]):
+        func = option(func)
+    return func
+
+
+def _sensors(current_noise: float | None, encoder_counts: int | None, exact: bool,
+             log_rate: float, default: bool) -> Any:
+    """The sensor model of the options; None (white noise on b_ID) when none is given and
+    ``default`` is False."""
+    from ropod_sysid.trajectory.noise import SensorNoise
+
+    if exact and encoder_counts is not None:
+        raise InputError("--exact-encoders and --encoder-counts: give one of them")
+    if not default and current_noise is None and encoder_counts is None and not exact:
+        return None
+    return SensorNoise(0.03 if current_noise is None else current_noise,
+                       None if exact else (encoder_counts or 2**14), log_rate)
+
+
+def _params(path: str | None, platform: Platform) -> Any:
+    if path is None:
+        return None
+    from ropod_sysid.io.paramfile import read_truth_parameters
+
+    return read_truth_parameters(path, platform)
+
+
 def _platform(path: str | None) -> Platform | None:
     return None if path is None else load_platform(path)
 
@@ -162,35 +203,59 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @click.option("--harmonics", default=5, show_default=True,
               type=Number(1, MAX_HARMONICS, integer=True),
               help="Harmonics of each Fourier series.")
-@click.option("--objective", type=click.Choice(["cond", "logdet"]), default="cond",
+@click.option("--objective", type=click.Choice(["sigma", "cond", "logdet"]), default="sigma",
               show_default=True,
-              help="cond: least condition number; logdet: largest log-determinant.")
+              help="sigma: least predicted error of the --target parameters under the sensor "
+                   "model (the fit's σ and the encoders' bias, as 'trajectory check' predicts "
+                   "them); cond: least condition number of the column-scaled regressor; "
+                   "logdet: its largest log-determinant.")
+@click.option("--target", default="inertial", show_default=True,
+              help="With --objective sigma: inertial (masses and inertias), all, or "
+                   "comma-separated parameter names.")
+@sensor_options
+@click.option("--params", "params_path", type=INPUT, default=None,
+              help="True parameter values for --objective sigma (relative errors); m_b and "
+                   "Jzz_b alone: the rest each unit type's typical values [default: thesis "
+                   "fixed masses, smart-wheel platforms only].")
 @click.option("--seed", default=0, show_default=True, type=SEED, help="Random seed.")
 @click.option("--maxiter", default=25, show_default=True, type=POSITIVE_INT,
               help="Generations of the search (differential evolution).")
 @output_options
 @quiet_option
 @reports_errors
-@writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
-        folder_files=OUT_FILES.values())
+@writes(inputs={"platform_path": "--platform", "params_path": "--params"},
+        folders={"out": "--out"}, folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                      pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
                      floor: tuple[float, ...], platform_path: str, duration: float,
-                     harmonics: int, objective: str, seed: int, maxiter: int, dt: float,
+                     harmonics: int, objective: str, target: str, current_noise: float | None,
+                     encoder_counts: int | None, exact_encoders: bool, log_rate: float,
+                     params_path: str | None, seed: int, maxiter: int, dt: float,
                      out: str, quiet: bool) -> None:
-    """Search a run whose stacked regressor is best conditioned; write it and its variants."""
+    """Search a run that determines the --target parameters best (or whose stacked regressor
+    is best conditioned); write it and its variants."""
     from ropod_sysid.trajectory import optimize
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
                      wheel_rate_max)
     platform = load_platform(platform_path)
+    sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=True)
+    params = _params(params_path, platform)
+    targets: str | list[str] = (target if target in ("inertial", "all")
+                                else [t.strip() for t in target.split(",") if t.strip()])
     result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
-                      _floor(floor), progress=not quiet, dt=dt)
+                      _floor(floor), progress=not quiet, dt=dt, target=targets,
+                      sensors=sensors, params=params)
     written = _write_variants(result.trajectory, out)
     if not quiet:
         click.echo(f"optimised run: {result.trajectory.duration:g} s, condition number "
                    f"{result.condition_number:.4g} (rank {result.rank}, identifiable "
                    f"subspace), {result.evaluations} candidates in {result.seconds:.1f} s")
+        if result.targets:
+            click.echo(f"predicted for {sensors.describe()} (trajectory check): "  # type: ignore[union-attr]
+                       + ", ".join(f"{n} σ {100 * r:.3g} %, bias "
+                                   f"{100 * result.target_bias[n]:+.3g} %"
+                                   for n, r in result.targets.items()))
         for note in result.notes:
             click.echo(f"note: {note}")
         click.echo("wrote " + ", ".join(str(p) for p in written))
@@ -203,9 +268,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="Platform YAML (geometry).")
 @limit_options
 @click.option("--noise", default=1.0, show_default=True, type=positive(),
-              help="White noise σ on b_ID for the predicted standard deviations [N, N m].")
-@click.option("--log-rate", default=100.0, show_default=True, type=positive("Hz"),
-              help="Sample rate of the logs the fit will use [Hz].")
+              help="White noise σ on b_ID for the predicted standard deviations [N, N m], "
+                   "unless a sensor model is given (--current-noise, --encoder-counts).")
+@sensor_options
 @click.option("--friction", type=click.Choice(["per-wheel", "shared", "body"]),
               default="per-wheel", show_default=True,
               help="Friction coefficients per wheel, shared, or per body axis.")
@@ -223,7 +288,8 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
                   wheel_rate_max: float | None, floor: tuple[float, ...], noise: float,
-                  log_rate: float, friction: str,
+                  current_noise: float | None, encoder_counts: int | None,
+                  exact_encoders: bool, log_rate: float, friction: str,
                   params_path: str | None, plot_path: str | None, as_json: bool) -> None:
     """Check a setpoint CSV before a run: limits broken and where, pivot rates and wheel flips
     (units with a pivot), wheel rates (every driven wheel), the predicted condition number and
@@ -237,13 +303,11 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
     platform = load_platform(platform_path)
     traj = read_trajectory_csv(traj_path)
-    params = None
-    if params_path is not None:
-        from ropod_sysid.io.paramfile import read_truth_parameters
-
-        params = read_truth_parameters(params_path, platform)
+    params = _params(params_path, platform)
     fl = _floor(floor)
-    report = check(traj, platform, limits, fl, noise, params, friction, log_rate)
+    sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=False)
+    report = check(traj, platform, limits, fl, noise, params, friction, log_rate,
+                   sensors=sensors)
     if plot_path is not None:
         plot(traj, plot_path, fl, limits, platform)
     if as_json:

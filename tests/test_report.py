@@ -421,14 +421,12 @@ def test_figures_drawn_by_workers_are_those_drawn_here(sim, truth_file, full_htm
     from ropod_sysid.report import painter
 
     platform, _, logs, result = sim
+    if painter.default_workers() < 2:
+        pytest.skip("one CPU or no fork here: every report is drawn in this process")
+    # full_html was drawn by the default two workers
     here = render_fit_report(result, logs[:2], compare=truth_file, compare_label="truth.json",
                              validation_logs=[logs[2]], workers=1)
     assert here == full_html
-    if "fork" not in __import__("multiprocessing").get_all_start_methods():
-        pytest.skip("no fork here: the figures are drawn in this process")
-    two = render_fit_report(result, logs[:2], compare=truth_file, compare_label="truth.json",
-                            validation_logs=[logs[2]], workers=2)
-    assert two == here
     with painter.Painter(2) as p:
         drawn = p.draw("residual_histograms", "not an array")
         with pytest.raises(Exception, match="not an array|index|dimension|shape|str"):

@@ -199,7 +199,8 @@ def test_optimize_other_platforms(kind, omni, mixed, omni_truth):
     pf = omni if kind == "omni" else mixed
     params = omni_truth if kind == "omni" else {"m_b": 30.0, "Jzz_b": 3.0}
     limits = Limits(wheel_rate_max=12.0)
-    opt = optimize(pf, duration=10.0, harmonics=3, maxiter=8, seed=0, limits=limits)
+    opt = optimize(pf, duration=10.0, harmonics=3, maxiter=8, seed=0, limits=limits,
+                   objective="cond")
     rep = check(opt.trajectory, pf, limits, params=params)
     assert rep.ok, [f.text() for f in rep.findings]
     assert rep.peaks["wheel_rate"] <= 12.0
@@ -255,6 +256,10 @@ def test_cli_optimize_and_check_a_mixed_platform(tmp_path, mixed):
     res = runner.invoke(main, ["trajectory", "optimize", "--platform", str(path), "--duration",
                                "8", "--harmonics", "2", "--maxiter", "2", "--out", str(out),
                                "--quiet"])
+    assert res.exit_code == 2 and "give the parameters (--params)" in res.output  # sigma needs
+    res = runner.invoke(main, ["trajectory", "optimize", "--platform", str(path), "--duration",
+                               "8", "--harmonics", "2", "--maxiter", "2", "--out", str(out),
+                               "--quiet", "--params", str(params)])
     assert res.exit_code == 0, res.output
     res = runner.invoke(main, ["trajectory", "check", str(out / "mirrored.csv"), "--platform",
                                str(path), "--params", str(params)])

@@ -29,6 +29,7 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
+from ropod_sysid.trajectory.noise import SensorNoise
 from ropod_sysid.trajectory.precheck import stacked_regressor
 from ropod_sysid.trajectory.prediction import _variant_prediction, predict_angles
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, _off_floor, variants
@@ -38,6 +39,8 @@ OPTIMIZE_DURATION = (5.0, 600.0)  # optimize(): shortest and longest run [s]
 MAX_HARMONICS = 20  # optimize(): most harmonics of each Fourier series
 SPEED_WEIGHT = 0.5  # optimize(): weight of −log(mean speed / v_max) in the objective
 MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
+SIGMA_RERANK = 6  # optimize("sigma"): candidates within the limits weighed by check at the end
+OBJECTIVES = ("sigma", "cond", "logdet")  # optimize(): what it minimises (the first: default)
 
 
 @dataclass
@@ -67,6 +70,8 @@ class OptimizeResult:
     generations: int
     seconds: float
     notes: list[str] = field(default_factory=list)
+    targets: dict[str, float] = field(default_factory=dict)  # "sigma": name → predicted rel. σ
+    target_bias: dict[str, float] = field(default_factory=dict)  # name → predicted rel. bias
 
 
 class _Objective:
@@ -74,7 +79,7 @@ class _Objective:
 
     def __init__(self, platform: Platform, duration: float, harmonics: int, limits: Limits,
                  floor: Floor, objective: str, friction: str, grid_rate: float,
-                 eval_rate: float) -> None:
+                 eval_rate: float, sigma: SigmaTarget | None = None) -> None:
         from ropod_sysid.model import PlatformModel
 
         self.platform = platform
@@ -93,6 +98,11 @@ class _Objective:
         self.eval_idx = np.arange(step // 2 + 1, n, step)  # interior samples (not at rest)
         self.rank: int | None = None
         self.evaluations = 0
+        self.sigma = sigma
+        self.rows_per_eval = (sigma.sensors.rows_per_second * step / grid_rate
+                              if sigma is not None else 1.0)
+        self.variances: np.ndarray | None = None  # mean row variances (3,), from the 1st batch
+        self.columns: np.ndarray | None = None  # the fit's base columns (rank deficiency)
 
     def twist(self, coef: np.ndarray, margin: float = 0.95,
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -135,6 +145,9 @@ class _Objective:
                               pred.angles[:, :, idx].reshape(n_s * 4 * idx.size, -1))
         a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, 3),
                                 self.friction)  # type: ignore[arg-type]
+        if self.sigma is not None:
+            value = self._sigma_value(a.reshape(n_s, -1, 3, a.shape[-1]), st)
+            return value + 10.0 * penalty + 100.0 * penalty**2
         a = a.reshape(n_s, -1, a.shape[-1])
         norms = np.linalg.norm(a, axis=1)
         a = a / np.where(norms > 0, norms, 1.0)[:, None, :]
@@ -154,11 +167,113 @@ class _Objective:
         return value + 10.0 * penalty + 100.0 * penalty**2
 
 
+    def _sigma_value(self, a: np.ndarray, st: object) -> np.ndarray:
+        """Mean log relative predicted σ of the target parameters (S,) from the candidates'
+        rows a (S, R, 3, p): the fit's white-noise σ (:mod:`ropod_sysid.trajectory.noise`), the
+        θ rows weighted as the fit weighs them, σ̂ from the rows' mean variances (taken once:
+        they hardly depend on the run), on the fit's base columns when the platform leaves
+        combinations (:meth:`SigmaTarget.columns`). (The errors-in-variables bias needs the
+        pivots' motion finer than this grid: :func:`optimize` weighs it in when it picks among
+        the best candidates.)"""
+        from ropod_sysid.trajectory.noise import row_variances
+
+        sig = self.sigma
+        assert sig is not None
+        if self.variances is None:
+            self.variances = row_variances(self.model, st, sig.truth_params, sig.sensors,
+                                           self.friction).mean(axis=0)
+            self.columns = sig.columns(a[0])
+        cols = self.columns
+        assert cols is not None
+        b = np.einsum("srdp,p->srd", a, sig.truth)
+        ms = np.mean(b**2, axis=1)  # (S, 3)
+        w = np.sqrt(0.5 * (ms[:, 0] + ms[:, 1]) / np.maximum(ms[:, 2], 1e-300))
+        v = self.variances
+        s2 = (v[0] + v[1] + w**2 * v[2]) / 3.0  # σ̂² of the weighted rows (S,)
+        aw = a[..., cols].copy()
+        aw[:, :, 2, :] *= w[:, None, None]
+        aw = aw.reshape(aw.shape[0], -1, len(cols))
+        norms = np.linalg.norm(aw, axis=1)  # (S, q)
+        norms = np.where(norms > 0, norms, 1.0)
+        aw = aw / norms[:, None, :]
+        gram = np.einsum("smi,smj->sij", aw, aw) * self.rows_per_eval
+        lam, vec = np.linalg.eigh(gram)
+        inv_diag = np.einsum("sjk,sk->sj", vec**2, 1.0 / np.maximum(lam, 1e-300 * lam[:, -1:]))
+        var = inv_diag / norms**2 * (s2 * sig.correlation)[:, None]  # (S, q)
+        tc = sig.target_cols(cols)
+        return np.log(np.sqrt(var[:, tc]) / sig.scale[cols][tc]).mean(axis=1)
+
+
+@dataclass
+class SigmaTarget:
+    """What ``objective="sigma"`` minimises: the predicted σ of ``names`` (of the fit's
+    ``all_names``) relative to their true values, under the sensor model ``sensors``."""
+
+    names: list[str]
+    all_names: list[str]
+    truth_params: object  # DynamicParameters
+    truth: np.ndarray  # (p,)
+    sensors: SensorNoise
+
+    @property
+    def correlation(self) -> float:
+        return self.sensors.grid.correlation
+
+    @property
+    def scale(self) -> np.ndarray:
+        """|true value| of every parameter (1 where it is 0)."""
+        return np.where(np.abs(self.truth) > 0, np.abs(self.truth), 1.0)
+
+    def columns(self, a: np.ndarray) -> np.ndarray:
+        """The fit's base columns for rows like ``a`` (R, 3, p): all of them, or on a platform
+        with structural combinations those :func:`ropod_sysid.solve.solve` keeps (a target
+        then stands for its identifiable combination, as in the fit's output)."""
+        from ropod_sysid.fit import gram_triangle
+        from ropod_sysid.solve import solve
+
+        rows = a.reshape(-1, a.shape[-1])
+        b = rows @ self.truth
+        ab = np.column_stack([rows, b])
+        sol = solve(gram_triangle(ab.T @ ab), rows.shape[0], self.all_names)
+        return np.flatnonzero(np.isfinite(sol.std_white))
+
+    def target_cols(self, cols: np.ndarray) -> np.ndarray:
+        """Positions within ``cols`` of the targets the fit determines (alone or as the base of a
+        combination)."""
+        idx = [self.all_names.index(n) for n in self.names]
+        return np.flatnonzero(np.isin(cols, idx))
+
+
+def sigma_target(platform: Platform, target: str | Sequence[str], friction: str,
+                 sensors: SensorNoise, params: object = None) -> SigmaTarget:
+    """The :class:`SigmaTarget` of ``target``: ``"inertial"`` (masses and inertias), ``"all"``
+    or parameter names; ``params`` the true values (:func:`ropod_sysid.trajectory.precheck.
+    true_parameters`: by default the thesis's fixed masses on smart-wheel platforms)."""
+    from ropod_sysid.params import is_inertial, parameter_names
+    from ropod_sysid.trajectory.precheck import true_parameters
+
+    names = parameter_names(platform, friction)  # type: ignore[arg-type]
+    if target == "inertial":
+        chosen = [n for n in names if is_inertial(n)]
+    elif target == "all":
+        chosen = list(names)
+    else:
+        chosen = [target] if isinstance(target, str) else list(target)
+        unknown = [n for n in chosen if n not in names]
+        if unknown:
+            raise InputError(f"--target {','.join(unknown)}: not a parameter of this platform "
+                             f"with {friction} friction; use inertial, all or names of "
+                             f"{', '.join(names[:8])}, …")
+    truth = true_parameters(platform, params)  # type: ignore[arg-type]
+    return SigmaTarget(chosen, names, truth, truth.vector(names), sensors)
+
+
 def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
-             objective: str = "cond", seed: int = 0, maxiter: int = 25,
+             objective: str = "sigma", seed: int = 0, maxiter: int = 25,
              limits: Limits | None = None, floor: Sequence[float] = DEFAULT_FLOOR,
              progress: bool = False, dt: float = 0.005, popsize: int = 4,
-             friction: str = "per-wheel") -> OptimizeResult:
+             friction: str = "per-wheel", target: str | Sequence[str] = "inertial",
+             sensors: SensorNoise | None = None, params: object = None) -> OptimizeResult:
     """An optimal excitation run: finite Fourier series per base DOF (Swevers et al.).
 
     The run is a member of :class:`FourierFamily` (speed, direction of travel and curvature of
@@ -172,7 +287,14 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
       subspace (σ_max / σ_r, r the structural rank: on the ropod's symmetric square the regressor
       is rank deficient for every run, thesis Sec. VI-C), minimised;
     * ``"logdet"`` — the log-determinant of the column-scaled information matrix on that
-      subspace, maximised.
+      subspace, maximised;
+    * ``"sigma"`` — the mean log of the ``target`` parameters' predicted standard deviations
+      relative to their true values, minimised: the σ the fit will report (its white-noise σ)
+      under the sensor model ``sensors`` (:mod:`ropod_sysid.trajectory.noise`; default 30 mA
+      current noise, 2¹⁴-count encoders, 100 Hz). Unlike the column-scaled regressor this
+      sees the signal level: a brisk run determines the parameters better than a slow one of
+      the same shape. On a platform with structural combinations a target stands for its
+      identifiable combination (as the fit reports it).
 
     Pivot rates (units with a turning joint) and, with a wheel-rate limit, wheel rates above
     80 % of their limit, and quasi-steady lags of a unit behind its pivot with
@@ -186,7 +308,9 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     ----------
     platform : unit types and geometry for the regressor and the predicted angles
     duration : length of the run [s]; harmonics : H, harmonics per DOF (base period = duration)
-    objective : ``"cond"`` or ``"logdet"``; seed : random seed (repeatable)
+    objective : ``"cond"``, ``"logdet"`` or ``"sigma"``; seed : random seed (repeatable)
+    target : for ``"sigma"``: ``"inertial"``, ``"all"`` or parameter names
+    sensors : for ``"sigma"``: the sensor model; params : true values (see :func:`sigma_target`)
     maxiter : generations of the search; popsize : population = popsize × 3(2H+1) candidates
     limits, floor : as for :func:`typical`; progress : progress bar on stderr (terminal only)
     dt : sample interval of the returned setpoints [s]; friction : friction model of A_ID,ext
@@ -205,8 +329,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
 
     limits = limits or Limits()
     floor = _check_floor(floor)
-    if objective not in ("cond", "logdet"):
-        raise InputError(f"unknown objective {objective!r}; use cond or logdet")
+    if objective not in OBJECTIVES:
+        raise InputError(f"unknown objective {objective!r}; use {', '.join(OBJECTIVES)}")
     if isinstance(harmonics, bool) or not isinstance(harmonics, int) \
             or not 1 <= harmonics <= MAX_HARMONICS:
         raise InputError(f"harmonics must be an integer from 1 to {MAX_HARMONICS}, got "
@@ -218,8 +342,10 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
         raise InputError(f"maxiter must be a positive integer, got {maxiter!r}")
     check_variant(friction)
     t_start = time.monotonic()
+    sigma = (sigma_target(platform, target, friction, sensors or SensorNoise(), params)
+             if objective == "sigma" else None)
     obj = _Objective(platform, float(duration), harmonics, limits, floor, objective, friction,
-                     grid_rate=10.0, eval_rate=2.0)
+                     grid_rate=10.0, eval_rate=2.0, sigma=sigma)
     dim = obj.family.n_coefficients
     generations = 0
     with Progress(maxiter, "optimize", quiet=not progress) as bar:
@@ -238,30 +364,68 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
                         limits.pivot_rate_max or 1.5)
     notes: list[str] = []
     why_first = ""
-    chosen = None
-    for rank_k, k in enumerate(np.argsort(res.population_energies)[:12]):
+    good: list[tuple[np.ndarray, Trajectory, float, float]] = []
+    broke = 0
+    for k in np.argsort(res.population_energies)[:12]:
         coef = res.population[k]
         _, _, s_v = obj.twist(coef[None])
         tw, _, _ = _scaled_twist(fam, coef[None], limits, floor, fine_t, 0.95, s_v)
         traj = Trajectory.from_twist(fine_t, tw[0, :, 0], tw[0, :, 1], tw[0, :, 2])
         ok, why = _verify(traj, platform, limits, floor)
         if ok:
-            chosen = (coef, traj, float(s_v[0]), float(res.population_energies[k]))
-            if rank_k:
-                notes.append(f"{rank_k} better candidate(s) broke a limit on the fine grid "
-                             f"({why_first}); took the next")
-            break
-        why_first = why_first or why
-    if chosen is None:
+            good.append((coef, traj, float(s_v[0]), float(res.population_energies[k])))
+            if sigma is None or len(good) == SIGMA_RERANK:
+                break
+        else:
+            broke += 0 if good else 1
+            why_first = why_first or why
+    if not good:
         raise PlanningError(f"no optimised run within the limits ({why_first}); try another "
                             "seed, more maxiter or a longer duration")
+    if broke:
+        notes.append(f"{broke} better candidate(s) broke a limit on the fine grid "
+                     f"({why_first}); took the next")
+    chosen = good[0]
+    if sigma is not None and len(good) > 1:
+        scores = [_total_error(g[1], platform, limits, floor, friction, sigma) for g in good]
+        best = int(np.argmin(scores))
+        if best:
+            notes.append(f"of the {len(good)} best candidates within the limits, number "
+                         f"{best + 1} has the least predicted error once the encoders' bias "
+                         "is counted (trajectory check)")
+        chosen = good[best]
     coef, traj, s_v, value = chosen
     model = PlatformModel(platform)
     cond = conditioning(stacked_regressor(*_variant_prediction(traj, model), model,
                                           friction)[0])
-    return OptimizeResult(traj, objective, value, cond.condition_number, cond.rank,
-                          obj.rank or 0, coef.reshape(3, -1), s_v, obj.evaluations,
-                          generations, time.monotonic() - t_start, notes)
+    out = OptimizeResult(traj, objective, value, cond.condition_number, cond.rank,
+                         obj.rank or 0, coef.reshape(3, -1), s_v, obj.evaluations,
+                         generations, time.monotonic() - t_start, notes)
+    if sigma is not None:
+        from ropod_sysid.trajectory.precheck import check
+
+        rep = check(traj, platform, limits, floor, params=sigma.truth_params,  # type: ignore[arg-type]
+                    friction=friction, sensors=sigma.sensors)
+        out.targets = {n: float(rep.relative_std[rep.names.index(n)]) for n in sigma.names}
+        out.target_bias = {n: float(rep.bias[j] / abs(rep.true_values[j]))
+                           if rep.true_values[j] else math.nan
+                           for n in sigma.names for j in [rep.names.index(n)]}
+        out.seconds = time.monotonic() - t_start
+    return out
+
+
+def _total_error(traj: Trajectory, platform: Platform, limits: Limits, floor: Floor,
+                 friction: str, sigma: SigmaTarget) -> float:
+    """Mean log of the targets' predicted √(σ² + bias²) relative to their values, by
+    :func:`~ropod_sysid.trajectory.precheck.check` on the run's own grid."""
+    from ropod_sysid.trajectory.precheck import check
+
+    rep = check(traj, platform, limits, floor, params=sigma.truth_params,  # type: ignore[arg-type]
+                friction=friction, sensors=sigma.sensors)
+    idx = [rep.names.index(n) for n in sigma.names]
+    total = np.hypot(rep.std[idx], np.nan_to_num(rep.bias[idx]))
+    ok = np.isfinite(total)
+    return float(np.mean(np.log(total[ok] / sigma.scale[idx][ok]))) if ok.any() else math.inf
 
 
 def _verify(traj: Trajectory, platform: Platform, limits: Limits,

@@ -38,15 +38,28 @@ def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = N
 
 
 def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                    angles: np.ndarray, friction: str, chunk: int = 20000) -> np.ndarray:
+                    angles: np.ndarray, friction: str, chunk: int = 20000,
+                    noise: tuple[object, object] | None = None,
+                    ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A_ID,ext (M, 3, p) at M samples with unit angles (M, J) (chunked to bound the memory);
-    the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a)."""
-    out = []
+    the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a). With ``noise``
+    = (true parameters, :class:`~ropod_sysid.trajectory.noise.SensorNoise`) also the rows'
+    variances (M, 3) (:func:`~ropod_sysid.trajectory.noise.row_variances`) and the error gram
+    of A (3, p, p) (:func:`~ropod_sysid.trajectory.noise.regressor_error_gram`)."""
+    from ropod_sysid.trajectory.noise import regressor_error_gram, row_variances
+
+    out, var = [], []
+    gram = 0.0
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
         st = model.state(q[sl], qd[sl], angles[sl])  # type: ignore[attr-defined]
         out.append(model.a_id_ext(st, qdd[sl], friction))  # type: ignore[attr-defined]
-    return np.concatenate(out, axis=0)
+        if noise is not None:
+            var.append(row_variances(model, st, noise[0], noise[1], friction))  # type: ignore[arg-type]
+            gram = gram + regressor_error_gram(model, st, noise[1], friction,  # type: ignore[arg-type]
+                                               qdd=qdd[sl])
+    a = np.concatenate(out, axis=0)
+    return a if noise is None else (a, np.concatenate(var, axis=0), gram)
 
 
 @dataclass

@@ -27,6 +27,7 @@ from ropod_sysid.trajectory.identifiability import (
     predicted_std,
 )
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Floor, Limits, _check_floor
+from ropod_sysid.trajectory.noise import SensorNoise, predicted_fit_std
 from ropod_sysid.trajectory.prediction import Prediction, _variant_prediction
 from ropod_sysid.trajectory.run_variants import VARIANTS, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
@@ -105,6 +106,9 @@ class CheckReport:
     friction: str = "per-wheel"
     wheel_peak: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
     actuators: list[str] = field(default_factory=list)
+    sensors: SensorNoise | None = None  # the sensor model of the std (else white σ_b = noise)
+    sigma_hat: float = math.nan  # with sensors: the predicted σ̂ of the fit's weighted rows
+    bias: np.ndarray = field(default_factory=lambda: np.zeros(0))  # with sensors: of q̈'s errors
 
     @property
     def turning(self) -> list[int]:
@@ -151,9 +155,14 @@ class CheckReport:
             "condition_number": num(self.condition_number),
             "condition_number_full": num(self.conditioning.condition_number_full),
             "noise": self.noise, "log_rate": self.log_rate,
-            "predicted": {n: {"value": float(v), "std": num(s), "relative_std": num(r)}
-                          for n, v, s, r in zip(self.names, self.true_values, self.std,
-                                                self.relative_std, strict=True)},
+            "predicted": {n: {"value": float(v), "std": num(s), "relative_std": num(r),
+                              **({"bias": num(float(self.bias[j]))}
+                                 if self.bias.size == len(self.names) else {})}
+                          for j, (n, v, s, r) in enumerate(zip(
+                              self.names, self.true_values, self.std, self.relative_std,
+                              strict=True))},
+            **({"sensors": self.sensors.describe(), "sigma_hat": num(self.sigma_hat)}
+               if self.sensors is not None else {}),
         }
 
     def text(self) -> str:
@@ -222,22 +231,40 @@ class CheckReport:
         else:
             out.append(f"  condition number (all columns): {c.condition_number_full:.4g}")
         out.append("")
-        out.append(f"predicted standard deviation for white noise σ_b = {self.noise:g} N / N m "
-                   f"on b_ID at {self.log_rate:g} Hz:")
-        out.append(f"{'parameter':<12}{'value':>12}{'std':>12}{'rel. std':>12}")
-        for n, v, sd, r in zip(self.names, self.true_values, self.std, self.relative_std,
-                               strict=True):
+        if self.sensors is not None:
+            out.append(f"predicted standard deviation of the fit (its white-noise σ) for "
+                       f"{self.sensors.describe()}: σ̂ = {self.sigma_hat:.3g} N of the "
+                       f"weighted rows, {1 / self.sensors.grid.correlation:.3g} of a row "
+                       "independent:")
+        else:
+            out.append(f"predicted standard deviation for white noise σ_b = {self.noise:g} N / "
+                       f"N m on b_ID at {self.log_rate:g} Hz:")
+        has_bias = self.sensors is not None and self.bias.size == len(self.names)
+        out.append(f"{'parameter':<12}{'value':>12}{'std':>12}{'rel. std':>12}"
+                   + (f"{'bias':>12}{'rel. bias':>11}" if has_bias else ""))
+        for j, (n, v, sd, r) in enumerate(zip(self.names, self.true_values, self.std,
+                                              self.relative_std, strict=True)):
             sd_s = f"{sd:.3g}" if math.isfinite(sd) else "n/a"
             r_s = (f"{100 * r:.3g} %" if math.isfinite(r) else
                    "combined" if not math.isfinite(sd) else "value 0")
-            out.append(f"{n:<12}{v:>12.4g}{sd_s:>12}{r_s:>12}")
+            line = f"{n:<12}{v:>12.4g}{sd_s:>12}{r_s:>12}"
+            if has_bias:
+                b = float(self.bias[j])
+                rb = f"{100 * b / abs(v):+.3g} %" if math.isfinite(b) and v else ""
+                line += (f"{b:>+12.3g}" if math.isfinite(b) else f"{'':>12}") + f"{rb:>11}"
+            out.append(line)
+        if has_bias:
+            out.append("bias: what the encoders' quantisation does to the values through the "
+                       "errors of q̈ in A_ID,ext (errors in the variables: a fit shrinks the "
+                       "columns they blur); it does not average out over a longer run")
         return "\n".join(out)
 
 
 def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
           floor: Sequence[float] = DEFAULT_FLOOR, noise: float = 1.0,
           params: Mapping[str, float] | None = None, friction: str = "per-wheel",
-          log_rate: float = 100.0, eval_rate: float = 20.0) -> CheckReport:
+          log_rate: float = 100.0, eval_rate: float = 20.0,
+          sensors: SensorNoise | None = None) -> CheckReport:
     """Check a planned run before putting the robot on the floor (thesis Sec. VI-A).
 
     Parameters
@@ -253,6 +280,10 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     log_rate : sample rate [Hz] of the logs the fit will use
     eval_rate : rate [Hz] at which the regressor is evaluated (the information is scaled to
         ``log_rate``)
+    sensors : a sensor model (:class:`~ropod_sysid.trajectory.noise.SensorNoise`): the standard
+        deviations are then those the fit will report (its white-noise σ, with σ̂ and the
+        rows' correlation predicted from current noise and encoder quantisation), and
+        ``noise`` and ``log_rate`` are not used
 
     Returns
     -------
@@ -306,18 +337,28 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
              "omega": float(omega.max()), "alpha": float(alpha.max()),
              "pivot_rate": pred.turning_peak, "wheel_rate": float(wheel.max())}
     # the stacked regressor along the planned motion (unit angles as predicted)
-    a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
-    cond = conditioning(a)
     names = parameter_names(platform, friction)  # type: ignore[arg-type]
     true_values = truth.vector(names)
-    std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
+    s_hat = math.nan
+    bias = np.full(len(names), np.nan)
+    if sensors is None:
+        a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
+        std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
+    else:
+        (a, var, gram), dt_eval = stacked_regressor(fine, twists, pred, model,  # type: ignore[misc]
+                                                    friction, eval_rate, noise=(truth, sensors))
+        std, bias, s_hat, _ = predicted_fit_std(a, var, true_values, sensors,
+                                                sensors.rows_per_second * dt_eval, gram)
+        log_rate = sensors.log_rate
+    cond = conditioning(a)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(np.abs(true_values) > 0, std / np.abs(true_values), math.inf)
     findings.sort(key=lambda f: (f.t_start, f.what))
     return CheckReport(traj.duration, traj.n_samples, platform.name, platform.unit_names,
                        limits, floor, peaks, findings, pivot_peak, pivot_peak_time, extent,
                        names, cond, float(noise), float(log_rate), true_values, std, rel,
-                       friction, wheel.max(axis=1), list(platform.layout.current_names))
+                       friction, wheel.max(axis=1), list(platform.layout.current_names),
+                       sensors, s_hat, bias)
 
 
 def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
@@ -348,9 +389,13 @@ def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
 
 
 def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, model: object,
-                      friction: str, eval_rate: float = 20.0) -> tuple[np.ndarray, float]:
+                      friction: str, eval_rate: float = 20.0,
+                      noise: tuple[object, SensorNoise] | None = None) -> tuple[np.ndarray, float]:
     """A_ID,ext (4M, 3, p) of the four variants (twists (4, N, 3) on the grid of ``fine``,
-    predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for."""
+    predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for.
+    With ``noise`` = (true parameters, sensors) A is returned with the rows' variances (4M, 3)
+    and the error gram of A (:func:`ropod_sysid.trajectory.noise.row_variances`,
+    :func:`~ropod_sysid.trajectory.noise.regressor_error_gram`)."""
     dt = float(np.median(np.diff(fine.t)))
     step = max(int(round(1.0 / (eval_rate * dt))), 1)
     idx = np.arange(0, fine.n_samples, step)
@@ -358,8 +403,9 @@ def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, mo
     n_var = twists.shape[0]
     a = _regressor_rows(model, q[:, idx].reshape(-1, 3), qd[:, idx].reshape(-1, 3),
                         qdd[:, idx].reshape(-1, 3),
-                        pred.angles[:, idx].reshape(n_var * idx.size, -1), friction)
-    return a, step * dt
+                        pred.angles[:, idx].reshape(n_var * idx.size, -1), friction,
+                        noise=noise)
+    return a, step * dt  # type: ignore[return-value]
 
 
 def true_parameters(platform: Platform, params: Mapping[str, float] | None) -> Parameters:

@@ -1,0 +1,161 @@
+"""The sensor model of ``trajectory check`` and ``optimize --objective sigma``
+(ropod_sysid.trajectory.noise), checked against fits of simulated logs: the σ it predicts is
+the fit's white-noise σ, and the bias it predicts from the encoders is the fit's error."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.fit import fit_logs
+from ropod_sysid.simulate import Sensors, record, simulate
+from ropod_sysid.trajectory import check, optimize, typical
+from ropod_sysid.trajectory.noise import SensorNoise, row_kernel
+from ropod_sysid.trajectory.run_variants import variants
+
+DURATION = 30.0
+
+
+@pytest.fixture(scope="module")
+def planned(off_square, truth):
+    """A 30 s typical run of the off-square ropod and its four variants simulated at 100 Hz."""
+    traj = typical(DURATION, platform=off_square)
+    runs = simulate(off_square, truth, [v.to_setpoints() for v in variants(traj).values()],
+                    rate=100.0)
+    return traj, runs
+
+
+def fitted(platform, runs, sensors: Sensors, seed: int = 0):
+    """The fit of the runs recorded with ``sensors``; the encoders' zero at a random place
+    within a count for each seed (else quantisation would be the same on every seed)."""
+    import dataclasses
+
+    rng = np.random.default_rng(seed)
+    counts = sensors.encoder_counts
+    logs = []
+    for k, r in enumerate(runs):
+        log = record(platform, r, r.log.t, dataclasses.replace(sensors, encoder_counts=None),
+                     rng, f"run{k}")
+        if counts:
+            q = 2 * np.pi / counts
+            offset = rng.uniform(0.0, q, log.angles.shape[1])
+            log = dataclasses.replace(log, angles=np.round((log.angles + offset) / q) * q
+                                      - offset)
+        logs.append(log)
+    return fit_logs(logs, platform).solution
+
+
+def test_the_sensor_model_checks_its_values():
+    with pytest.raises(InputError, match=r"^--current-noise -1: give σ in A, ≥ 0$"):
+        SensorNoise(-1.0)
+    with pytest.raises(InputError, match="--encoder-counts 8: give a whole number of counts"):
+        SensorNoise(encoder_counts=8)
+    with pytest.raises(InputError, match="no sensor noise"):
+        SensorNoise(0.0, None)
+    sn = SensorNoise(log_rate=1000.0)
+    assert (sn.k, sn.grid.step, sn.rows_per_second) == (101, 10, 100.0)
+
+
+def test_a_row_kernel_spreads_the_rows_loess_over_the_step():
+    from ropod_sysid import signals
+    from ropod_sysid.regressor import RowGrid
+
+    grid = RowGrid(step=3, span=5)
+    g = row_kernel(grid, np.array([1.0]))
+    np.testing.assert_allclose(g[::3], signals.loess_kernel(5))
+    assert np.count_nonzero(g) == np.count_nonzero(signals.loess_kernel(5))
+    np.testing.assert_allclose(row_kernel(RowGrid(1, 3), np.array([0.5, 0.5])), [0.5, 0.5])
+
+
+@pytest.mark.parametrize(("current", "counts", "tol"), [(0.03, None, 0.05), (0.0, 2**14, 0.25),
+                                                       (0.03, 2**14, 0.25)])
+def test_the_predicted_sigma_is_the_fits_white_noise_sigma(off_square, truth, planned,
+                                                           current, counts, tol):
+    """Current noise alone: within 5 % (measured: 0.5–1 %); with encoder quantisation within
+    25 % (measured: the prediction 10–22 % high). Every parameter: the σ share one σ̂."""
+    traj, runs = planned
+    rep = check(traj, off_square, sensors=SensorNoise(current, counts, 100.0))
+    sol = fitted(off_square, runs, Sensors(encoder_counts=counts, current_noise=current))
+    assert rep.names == sol.names
+    ratio = sol.std_white / rep.std
+    assert np.all(np.abs(ratio - 1.0) < tol), dict(zip(sol.names, np.round(ratio, 3),
+                                                               strict=True))
+    assert np.sqrt(sol.sigma2) == pytest.approx(rep.sigma_hat, rel=tol)
+
+
+@pytest.fixture(scope="module")
+def planned_37(off_square, truth):
+    traj = typical(37.0, platform=off_square)
+    runs = simulate(off_square, truth, [v.to_setpoints() for v in variants(traj).values()],
+                    rate=100.0)
+    return traj, runs
+
+
+def test_the_predicted_encoder_bias_is_the_fits_error(off_square, truth, planned_37):
+    """Quantised wheel and pivot angles, no current noise, eight encoder zeros: on the 37 s
+    typical run the fits' mean errors of the masses and inertias are the predicted
+    errors-in-variables bias (same sign, within 40 %; measured 5–40 %) where it stands out of
+    the seeds' scatter. (Not on every run: on the 30 s typical run the prediction for m_b is
+    −1.8 kg and the fits' mean +0.7 ± 0.3 kg, a difference not understood; docs/method.md.)"""
+    traj, runs = planned_37
+    rep = check(traj, off_square, sensors=SensorNoise(0.0, 2**14, 100.0))
+    errs = []
+    for seed in range(8):
+        sol = fitted(off_square, runs, Sensors(encoder_counts=2**14), seed)
+        errs.append(sol.values - truth.vector(sol.names))
+    errs = np.array(errs)
+    mean, se = errs.mean(axis=0), errs.std(axis=0, ddof=1) / np.sqrt(len(errs))
+    shown = 0
+    for name in ("m_b", "Jzz_b", "m_wh", "Jzz_wh", "Jrot_w"):
+        j = sol.names.index(name)
+        if abs(rep.bias[j]) > 3 * se[j]:
+            shown += 1
+            assert mean[j] == pytest.approx(rep.bias[j], rel=0.4), name
+    assert shown >= 3
+
+
+def test_optimize_for_sigma_beats_the_typical_run(off_square):
+    typ = check(typical(10.0, platform=off_square), off_square, sensors=SensorNoise())
+    opt = optimize(off_square, duration=10.0, harmonics=3, maxiter=4, seed=0)
+    assert opt.objective == "sigma" and set(opt.targets) == {"m_b", "Jzz_b", "m_wh", "Jzz_wh",
+                                                            "Jrot_w"}
+    rep = check(opt.trajectory, off_square, sensors=SensorNoise())
+    assert rep.ok, [f.text() for f in rep.findings]
+    idx = [rep.names.index(n) for n in opt.targets]
+    assert np.all(rep.relative_std[idx] * 1.5 < typ.relative_std[idx])
+    np.testing.assert_allclose([opt.targets[n] for n in opt.targets], rep.relative_std[idx])
+    with pytest.raises(InputError, match="--target m_x: not a parameter"):
+        optimize(off_square, duration=10.0, maxiter=1, target=["m_x"])
+
+
+def test_check_and_optimize_take_the_sensor_model_on_the_command_line(tmp_path, off_square):
+    from click.testing import CliRunner
+
+    from ropod_sysid.cli.main import main
+    from ropod_sysid.platform import save_platform
+
+    path = tmp_path / "p.yaml"
+    save_platform(off_square, path)
+    runner = CliRunner()
+    out = tmp_path / "opt"
+    res = runner.invoke(main, ["trajectory", "optimize", "--platform", str(path), "--duration",
+                               "6", "--harmonics", "2", "--maxiter", "2", "--out", str(out),
+                               "--target", "m_b,Jzz_b", "--current-noise", "0.05"])
+    assert res.exit_code == 0, res.output
+    assert "predicted for 0.05 A current noise, 16384-count encoders" in res.output
+    assert "m_b σ " in res.output and "Jzz_b σ " in res.output
+    res = runner.invoke(main, ["trajectory", "check", str(out / "original.csv"), "--platform",
+                               str(path), "--encoder-counts", "4096", "--log-rate", "200"])
+    assert res.exit_code == 0, res.output
+    assert ("predicted standard deviation of the fit (its white-noise σ) for 0.03 A current "
+            "noise, 4096-count encoders, 200 Hz logs") in res.output
+    assert "rel. bias" in res.output
+    res = runner.invoke(main, ["trajectory", "check", str(out / "original.csv"), "--platform",
+                               str(path), "--exact-encoders", "--encoder-counts", "4096"])
+    assert res.exit_code == 2
+    assert res.output.strip() == ("error: --exact-encoders and --encoder-counts: give one of "
+                                  "them")
+    res = runner.invoke(main, ["trajectory", "check", str(out / "original.csv"), "--platform",
+                               str(path)])
+    assert "white noise σ_b = 1 N" in res.output  # no sensor model: as before
