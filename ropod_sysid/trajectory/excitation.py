@@ -225,17 +225,13 @@ class SigmaTarget:
         return np.where(np.abs(self.truth) > 0, np.abs(self.truth), 1.0)
 
     def columns(self, a: np.ndarray) -> np.ndarray:
-        """The fit's base columns for rows like ``a`` (R, 3, p): all of them, or on a platform
-        with structural combinations those :func:`ropod_sysid.solve.solve` keeps (a target
-        then stands for its identifiable combination, as in the fit's output)."""
-        from ropod_sysid.fit import gram_triangle
-        from ropod_sysid.solve import solve
+        """The fit's base columns for rows like ``a`` (R, 3, p)
+        (:func:`ropod_sysid.trajectory.noise.base_columns`; on a platform with structural
+        combinations a target then stands for its identifiable combination, as in the fit's
+        output)."""
+        from ropod_sysid.trajectory.noise import base_columns
 
-        rows = a.reshape(-1, a.shape[-1])
-        b = rows @ self.truth
-        ab = np.column_stack([rows, b])
-        sol = solve(gram_triangle(ab.T @ ab), rows.shape[0], self.all_names)
-        return np.flatnonzero(np.isfinite(sol.std_white))
+        return base_columns(a, self.truth)
 
     def target_cols(self, cols: np.ndarray) -> np.ndarray:
         """Positions within ``cols`` of the targets the fit determines (alone or as the base of a

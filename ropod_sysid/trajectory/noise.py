@@ -30,7 +30,7 @@ the measured angle rates a type uses (the swivel's δ̇). Through the swivel's c
 pivots' acceleration carries q̈ / d, so the unit-inertia columns carry q̈'s errors a
 hundredfold: this bias, not σ, limits a run that a white-noise criterion calls excellent. It
 does not shrink with the run's length. (Measured, 20 seeds: on the 37 s typical and optimised
-runs of the off-square ropod the predicted and the fits' mean errors agree within 5–15 %; on
+runs of the off-square ropod the predicted and the fits' mean errors agree within 1–7 %; on
 the 30 s typical run they do not — −1.8 kg predicted for m_b, +0.7 ± 0.3 kg fitted — for a
 reason not found.) The errors of A's angle-dependent columns are second order and left out.
 """
@@ -202,16 +202,31 @@ def regressor_error_gram(model: object, st: object, noise: SensorNoise,
         power = float(np.sum(row_kernel(noise.grid, velocity_kernel(noise.k, noise.dt)) ** 2))
         var = encoder_variance(int(noise.encoder_counts)) * power * np.minimum(
             np.abs(rates) * noise.dt / (2.0 * math.pi / int(noise.encoder_counts)), 1.0)
-        for j in range(rates.shape[1]):
+        for j in measured_rate_channels(model, st, qdd, friction):
             moved = rates.copy()
             moved[:, j] += h
             d = (model.a_id_ext(model.state(st.q, st.qd, st.angles, moved), qdd, friction)  # type: ignore[attr-defined]
                  - base) / h
-            if not np.any(d):
-                continue
             cov = np.zeros((n, 3, 3))
             cov[:, 0, 0] = var[:, j]
             out = out + error_gram(np.stack([d, 0 * d, 0 * d], axis=1), cov, groups)
+    return out
+
+
+def measured_rate_channels(model: object, st: object, qdd: np.ndarray,
+                           friction: str) -> list[int]:
+    """The angle channels whose measured rate A_ID,ext depends on (the unit types that use
+    measured rates: the swivel's pivots), found on a few rows."""
+    few = min(8, st.q.shape[0])  # type: ignore[attr-defined]
+    q, qd, ang = st.q[:few], st.qd[:few], st.angles[:few]  # type: ignore[attr-defined]
+    rates = st.angle_rate[:few]  # type: ignore[attr-defined]
+    base = model.a_id_ext(model.state(q, qd, ang, rates), qdd[:few], friction)  # type: ignore[attr-defined]
+    out = []
+    for j in range(rates.shape[1]):
+        moved = rates.copy()
+        moved[:, j] += 1.0
+        if np.any(model.a_id_ext(model.state(q, qd, ang, moved), qdd[:few], friction) != base):  # type: ignore[attr-defined]
+            out.append(j)
     return out
 
 
@@ -263,12 +278,25 @@ def rotation_weight(b: np.ndarray) -> float:
     return float(np.sqrt(0.5 * (ms[0] + ms[1]) / ms[2])) if ms[2] > 0 else 1.0
 
 
+def base_columns(a: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """The columns of rows ``a`` (M, 3, p) a fit keeps (:func:`ropod_sysid.solve.solve`): all
+    of them, or on a rank-deficient problem the base of each identifiable combination."""
+    from ropod_sysid.fit import gram_triangle
+    from ropod_sysid.solve import solve
+
+    rows = a.reshape(-1, a.shape[-1])
+    ab = np.column_stack([rows, rows @ truth])
+    sol = solve(gram_triangle(ab.T @ ab), rows.shape[0], [f"p{j}" for j in range(rows.shape[1])])
+    return np.flatnonzero(np.isfinite(sol.std_white))
+
+
 def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,
                       noise: SensorNoise, rows_per_eval: float,
                       error_gram: np.ndarray | None = None,
                       ) -> tuple[np.ndarray, np.ndarray, float, float]:
     """The white-noise standard deviations (p,) a fit of the rows will report, as the fit forms
-    them: σ̂ √(c diag((ÃᵀÃ)⁺)) on the identifiable subspace (inf outside it); and the bias
+    them: σ̂ √(c diag((ÃᵀÃ)⁻¹)) on the fit's columns (:func:`base_columns`: on a rank-deficient
+    problem a combination's σ for its base parameter, inf for the dependent ones); and the bias
     (p,) the errors of q̈ in A_ID,ext give the fit, −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m
     (:func:`regressor_error_gram`; zero without it, nan outside the identifiable subspace).
 
@@ -283,6 +311,12 @@ def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,
     moving = np.abs(a).sum(axis=(1, 2)) > 0  # the fit leaves out the rows at rest
     s = sigma_hat(variances[moving] if moving.any() else variances, w_rot)
     std = predicted_std(a, (s, s / w_rot), rows_per_second=rows_per_eval)
+    if not np.isfinite(std).all():
+        # as the fit: the dependent parameters of a combination set to 0, the others (its
+        # base) standing for the identifiable combinations, with their σ
+        cols = base_columns(a, truth)
+        std = np.full_like(truth, np.inf)
+        std[cols] = predicted_std(a[..., cols], (s, s / w_rot), rows_per_second=rows_per_eval)
     bias = np.zeros_like(truth)
     if error_gram is not None:
         inside = np.isfinite(std)
