@@ -26,11 +26,11 @@ import time
 import numpy as np
 
 from ropod_sysid.fit import fit_logs
+from ropod_sysid.noise import SensorNoise
 from ropod_sysid.params import is_inertial, thesis_fixed_masses
 from ropod_sysid.platform import ropod_platform
 from ropod_sysid.simulate import Sensors, record, simulate
 from ropod_sysid.trajectory import optimize, typical
-from ropod_sysid.trajectory.noise import SensorNoise
 from ropod_sysid.trajectory.precheck import check
 from ropod_sysid.trajectory.run_variants import variants
 

@@ -103,14 +103,16 @@ def parse_row_step(text: str) -> int | None:
 def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
                 weight_rotation: str, physical: bool, input_delay: str, rcond: float,
                 row_step: str = "auto", split_gaps: bool = False,
-                robust: str = "none") -> FitOptions:
+                robust: str = "none", control_period: float = 0.0,
+                encoder_counts: int | None = None) -> FitOptions:
     sp = Span.parse(span)
     return FitOptions(friction=friction,  # type: ignore[arg-type]
                       span=sp, fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
                       physical=physical, input_delay=parse_delay(input_delay, sp),  # type: ignore
                       rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps,
-                      robust=robust)  # type: ignore[arg-type]
+                      robust=robust, control_period=control_period,  # type: ignore[arg-type]
+                      encoder_counts=encoder_counts)
 
 
 def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span: Span | None,
@@ -169,6 +171,16 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               help="Lag of the motion behind the logged torque: seconds, at most one span "
                    "either way (negative: the motion leads the logged torque), or auto "
                    "(searched within ±20 ms, at most one span).")
+@click.option("--control-period", default=0.0, show_default=True, type=float, metavar="S",
+              help="The drives' control period [s], e.g. 0.001 for 1 kHz: each torque is held "
+                   "that long after it is logged (zero-order hold), so the motion lags it by "
+                   "half a period on average; added to --input-delay (not with auto, which "
+                   "searches the whole lag).")
+@click.option("--encoder-counts", type=int, default=None, metavar="N",
+              help="Counts per revolution of the wheel and pivot encoders: correct the fit "
+                   "for their quantisation, whose errors in the accelerations sit in A_ID,ext "
+                   "and shrink the values (corrected least squares; docs/method.md). Costs "
+                   "about 3× the fit's time.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
@@ -191,7 +203,9 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
             friction: str,
             span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
             physical: bool, robust: str,
-            input_delay: str, rcond: float, report_path: str | None, compare_path: str | None,
+            input_delay: str, control_period: float, encoder_counts: int | None,
+            rcond: float, report_path: str | None,
+            compare_path: str | None,
             validate_logs: tuple[str, ...], split_gaps: bool, workers: int | None,
             dask_address: str | None, quiet: bool) -> None:
     """Fit the dynamic parameters to LOGS (stacked) and write the parameter file.
@@ -200,7 +214,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                          row_step, split_gaps, robust)
+                          row_step, split_gaps, robust, control_period, encoder_counts)
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", node_name):
         raise InputError(f"--node-name {node_name!r}: a ROS 2 node name has letters, digits and "
                          "underscores and does not start with a digit, e.g. ropod_dynamic_model")

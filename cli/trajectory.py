@@ -96,7 +96,7 @@ def _write_variants(traj: Any, out: str) -> list[Path]:
 
 
 def sensor_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """The sensor model of the logs a run will give (:class:`ropod_sysid.trajectory.noise.
+    """The sensor model of the logs a run will give (:class:`ropod_sysid.noise.
     SensorNoise`)."""
     for option in reversed([
         click.option("--current-noise", type=Number(0, 100, unit="A"), default=None,
@@ -118,7 +118,7 @@ def _sensors(current_noise: float | None, encoder_counts: int | None, exact: boo
              log_rate: float, default: bool) -> Any:
     """The sensor model of the options; None (white noise on b_ID) when none is given and
     ``default`` is False."""
-    from ropod_sysid.trajectory.noise import SensorNoise
+    from ropod_sysid.noise import SensorNoise
 
     if exact and encoder_counts is not None:
         raise InputError("--exact-encoders and --encoder-counts: give one of them")

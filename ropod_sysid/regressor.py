@@ -545,13 +545,19 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: in
 
 
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
-              chunk: int = 20000) -> Triangles:
-    """The log's QR triangles per DOF, built block by block (memory bounded by ``chunk``)."""
+              chunk: int = 20000, encoder_counts: int | None = None) -> Triangles:
+    """The log's QR triangles per DOF, built block by block (memory bounded by ``chunk``);
+    with ``encoder_counts`` also the encoders' error gram of A
+    (:func:`ropod_sysid.noise.fit_error_gram`)."""
     tri: Triangles | None = None
     per = pre.grid.stretch_rows(pre.dt)
     for idx, a, b in system(model, pre, friction, chunk):
         block = block_triangles(a, b, pre.source, (int(idx[0]) - pre.trim) // pre.grid.step,
                                 per)
+        if encoder_counts:
+            from ropod_sysid.noise import fit_error_gram
+
+            block.error_gram = fit_error_gram(model, pre, idx, encoder_counts, friction)
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")

@@ -121,6 +121,8 @@ class Triangles:
     delays: np.ndarray | None = field(default=None, repr=False)
     delay_order: int = 1
     idle: int = 0  # rows at rest: zero rows, no equation (ropod_sysid.regressor.at_rest)
+    # E[δA_dᵀ δA_d] (3, p, p) of the encoders' errors in A (fit --encoder-counts), or None
+    error_gram: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def equations(self) -> int:
@@ -139,7 +141,8 @@ class Triangles:
         return Triangles(r, self.rows + other.rows, self.label, self.samples + other.samples,
                          self.correlation, self.duration + other.duration,
                          self._joined_stretches(other), self.stretch_rows or other.stretch_rows,
-                         self.delays, self.delay_order, self.idle + other.idle)
+                         self.delays, self.delay_order, self.idle + other.idle,
+                         _sum_grams(self.error_gram, other.error_gram))
 
     def at_delay(self, delay: float, stretches: bool = True) -> Triangles:
         """The triangles of one delay [s] from those of the node delays (:attr:`delays`): b_ID
@@ -156,7 +159,8 @@ class Triangles:
         r = np.stack([qr_triangle(rd @ t) for rd in self.r])
         st = [t.T @ s @ t for s in self.stretches] if stretches else []
         return Triangles(r, self.rows, self.label, self.samples, self.correlation,
-                         self.duration, st, self.stretch_rows, idle=self.idle)
+                         self.duration, st, self.stretch_rows, idle=self.idle,
+                         error_gram=self.error_gram)
 
     def _joined_stretches(self, other: Triangles) -> list[np.ndarray]:
         """The stretches of ``other`` (the rows after this block's) after this block's: when
@@ -192,6 +196,11 @@ class Triangles:
         ms = self.mean_square_b()
         trans = 0.5 * (ms[0] + ms[1])
         return float(np.sqrt(trans / ms[2])) if ms[2] > 0 else 1.0
+
+    def weighted_error_gram(self, w_rot: float) -> np.ndarray | None:
+        """E[δÃᵀδÃ] (p, p) of the system with the θ rows scaled by ``w_rot``, or None."""
+        e = self.error_gram
+        return None if e is None else e[0] + e[1] + w_rot**2 * e[2]
 
     def weighted(self, w_rot: float) -> np.ndarray:
         """Triangle of the system with the θ rows scaled by ``w_rot``."""
@@ -289,6 +298,13 @@ def numerical_rank(sv: np.ndarray, rcond: float = RCOND) -> int:
     (descending) of a column-scaled regressor above ``rcond`` · σ_max."""
     sv = np.asarray(sv, float)
     return int(np.sum(sv > rcond * sv[0])) if sv.size and sv[0] > 0 else 0
+
+
+def _sum_grams(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """The sum of two blocks' error grams (None when neither has one)."""
+    if a is None:
+        return b
+    return a if b is None else a + b
 
 
 def jackknife_covariance(stretches: np.ndarray, idx: np.ndarray, values: np.ndarray,

@@ -143,8 +143,9 @@ class _Blocks:
                  friction: Friction,
                  chunk: int, source: str, params: DynamicParameters | None,
                  keep_series: bool, row_step: int | None = None, threaded: bool = True,
-                 plot: bool = False) -> None:
+                 plot: bool = False, encoder_counts: int | None = None) -> None:
         self.platform = platform
+        self.encoder_counts = encoder_counts
         self.model = PlatformModel(platform)
         self.k_t = platform.torque_constants()
         self.span = span
@@ -313,6 +314,12 @@ class _Blocks:
                                   pre.angles[rows], pre.angle_rates[rows], pre.tau[rows])
         block = block_triangles(a, b, self.source, (pa + first - self.trim) // self.grid.step,
                                 self.grid.stretch_rows(self.dt))
+        if self.encoder_counts:
+            from ropod_sysid.noise import fit_error_gram
+
+            rows = first + self.grid.step * np.arange(count)
+            block.error_gram = fit_error_gram(self.model, pre, rows, self.encoder_counts,
+                                              self.friction)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
@@ -386,7 +393,8 @@ class _Run:
 def _pass(source: Source, platform: Platform, span: Span, input_delay: float | DelayBracket,
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
           resample: bool, prefetch: bool, row_step: int | None, split_gaps: bool,
-          done: list[StreamResult | None], dropped: list[str], plot: bool = False) -> None:
+          done: list[StreamResult | None], dropped: list[str], plot: bool = False,
+          encoder_counts: int | None = None) -> None:
     """One pass over a log; with ``split_gaps`` over each piece between its gaps as a log of
     its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
     pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
@@ -429,7 +437,8 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
                     run = None
                 if run is None:
                     blocks = _Blocks(platform, span, input_delay, friction, chunk, name, params,
-                                     keep_series, row_step, threaded=prefetch, plot=plot)
+                                     keep_series, row_step, threaded=prefetch, plot=plot,
+                                     encoder_counts=encoder_counts)
                     run = _Run(name, log.piece, first, resample and log.piece == restart,
                                blocks)
                 run.push(log)
@@ -447,12 +456,13 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
                   chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                   keep_series: bool = False, prefetch: bool = True,
                   row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
-                  ) -> list[StreamResult]:
+                  encoder_counts: int | None = None) -> list[StreamResult]:
     """:func:`stream_log`; with ``split_gaps`` a log with gaps in time
     (:mod:`ropod_sysid.io.timebase`) gives one result per piece between them, each a log of
     its own (its grid, its smoother ends), named ``run.csv[2]`` …; a piece too short for the
     smoother span is left out with a note (on the first piece kept); none left is an error.
-    Without ``split_gaps`` a gap is an error. ``plot``: see :func:`stream_log`."""
+    Without ``split_gaps`` a gap is an error. ``plot``: see :func:`stream_log`.
+    ``encoder_counts``: also the encoders' error gram of A (``fit --encoder-counts``)."""
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
@@ -465,7 +475,7 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
             try:
                 _pass(source, platform, span, input_delay, friction, chunk, params,
                       keep_series, resample, prefetch, row_step, split_gaps, done, dropped,
-                      plot)
+                      plot, encoder_counts)
                 break
             except _OffGrid:
                 # a step off the grid after the head: the log (piece) is jittered after all;
@@ -510,13 +520,15 @@ def piece_triangles(source: Source, platform: Platform, span: Span | None = None
                     input_delay: float | DelayBracket = 0.0, friction: Friction = "per-wheel",
                     chunk: int = DEFAULT_CHUNK, row_step: int | None = None,
                     split_gaps: bool = False, plot: bool = False,
+                    encoder_counts: int | None = None,
                     ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
     """(name, triangles, reading notes, plot data) of a log, or of each of its pieces with
     ``split_gaps`` (:func:`stream_pieces`): the unit of work of a fit, run on Dask workers.
     ``plot``: also what the report draws (bounded size), else None."""
     return [(r.source, r.triangles, r.notes, r.plot)
             for r in stream_pieces(source, platform, span, input_delay, friction, chunk,
-                                   row_step=row_step, split_gaps=split_gaps, plot=plot)]
+                                   row_step=row_step, split_gaps=split_gaps, plot=plot,
+                                   encoder_counts=encoder_counts)]
 
 
 def validate_source(source: Source, platform: Platform, params: DynamicParameters,

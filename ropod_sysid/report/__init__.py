@@ -123,8 +123,11 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     robust_extra = pfile.extras.get("robust")
     robust = str(robust_extra.get("method")) if isinstance(robust_extra, dict) \
         and robust_extra.get("method") in ROBUST_METHODS else "none"
+    counts = pfile.extras.get("encoder_counts")
+    counts = int(counts) if isinstance(counts, int) and not isinstance(counts, bool) else None
     options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
-                         row_step=row_step, robust=robust)  # type: ignore[arg-type]
+                         row_step=row_step, robust=robust,  # type: ignore[arg-type]
+                         encoder_counts=counts)
 
     check_distinct([log for log in logs if not isinstance(log, Log)])
     for log in logs:
@@ -133,7 +136,7 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     with Progress(len(logs), "logs", quiet=quiet) as bar:  # (a bar on a terminal only)
         for log in logs:
             streamed += stream_pieces(log, platform, span, delay, friction, row_step=row_step,
-                                      split_gaps=split_gaps, plot=True)
+                                      split_gaps=split_gaps, plot=True, encoder_counts=counts)
             bar.update(1)
     systems = [res.triangles for res in streamed]
     if robust != "none" and sum(len(st) for s in systems for st in s.stretches) \

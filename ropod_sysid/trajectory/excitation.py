@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.noise import SensorNoise
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.fourier import FourierFamily, _scaled_twist
 from ropod_sysid.trajectory.identifiability import _world_motion, conditioning
@@ -29,7 +30,6 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
-from ropod_sysid.trajectory.noise import SensorNoise
 from ropod_sysid.trajectory.precheck import stacked_regressor
 from ropod_sysid.trajectory.prediction import _variant_prediction, predict_angles
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, _off_floor, variants
@@ -169,13 +169,13 @@ class _Objective:
 
     def _sigma_value(self, a: np.ndarray, st: object) -> np.ndarray:
         """Mean log relative predicted σ of the target parameters (S,) from the candidates'
-        rows a (S, R, 3, p): the fit's white-noise σ (:mod:`ropod_sysid.trajectory.noise`), the
+        rows a (S, R, 3, p): the fit's white-noise σ (:mod:`ropod_sysid.noise`), the
         θ rows weighted as the fit weighs them, σ̂ from the rows' mean variances (taken once:
         they hardly depend on the run), on the fit's base columns when the platform leaves
         combinations (:meth:`SigmaTarget.columns`). (The errors-in-variables bias needs the
         pivots' motion finer than this grid: :func:`optimize` weighs it in when it picks among
         the best candidates.)"""
-        from ropod_sysid.trajectory.noise import row_variances
+        from ropod_sysid.noise import row_variances
 
         sig = self.sigma
         assert sig is not None
@@ -226,10 +226,10 @@ class SigmaTarget:
 
     def columns(self, a: np.ndarray) -> np.ndarray:
         """The fit's base columns for rows like ``a`` (R, 3, p)
-        (:func:`ropod_sysid.trajectory.noise.base_columns`; on a platform with structural
+        (:func:`ropod_sysid.noise.base_columns`; on a platform with structural
         combinations a target then stands for its identifiable combination, as in the fit's
         output)."""
-        from ropod_sysid.trajectory.noise import base_columns
+        from ropod_sysid.noise import base_columns
 
         return base_columns(a, self.truth)
 
@@ -286,7 +286,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
       subspace, maximised;
     * ``"sigma"`` — the mean log of the ``target`` parameters' predicted standard deviations
       relative to their true values, minimised: the σ the fit will report (its white-noise σ)
-      under the sensor model ``sensors`` (:mod:`ropod_sysid.trajectory.noise`; default 30 mA
+      under the sensor model ``sensors`` (:mod:`ropod_sysid.noise`; default 30 mA
       current noise, 2¹⁴-count encoders, 100 Hz). Unlike the column-scaled regressor this
       sees the signal level: a brisk run determines the parameters better than a slow one of
       the same shape. On a platform with structural combinations a target stands for its

@@ -43,10 +43,10 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
                     ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A_ID,ext (M, 3, p) at M samples with unit angles (M, J) (chunked to bound the memory);
     the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a). With ``noise``
-    = (true parameters, :class:`~ropod_sysid.trajectory.noise.SensorNoise`) also the rows'
-    variances (M, 3) (:func:`~ropod_sysid.trajectory.noise.row_variances`) and the error gram
-    of A (3, p, p) (:func:`~ropod_sysid.trajectory.noise.regressor_error_gram`)."""
-    from ropod_sysid.trajectory.noise import regressor_error_gram, row_variances
+    = (true parameters, :class:`~ropod_sysid.noise.SensorNoise`) also the rows'
+    variances (M, 3) (:func:`~ropod_sysid.noise.row_variances`) and the error gram
+    of A (3, p, p) (:func:`~ropod_sysid.noise.regressor_error_gram`)."""
+    from ropod_sysid.noise import regressor_error_gram, row_variances
 
     out, var = [], []
     gram = 0.0

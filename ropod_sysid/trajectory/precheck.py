@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.noise import SensorNoise, predicted_fit_std
 from ropod_sysid.params import Parameters
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.identifiability import (
@@ -27,7 +28,6 @@ from ropod_sysid.trajectory.identifiability import (
     predicted_std,
 )
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Floor, Limits, _check_floor
-from ropod_sysid.trajectory.noise import SensorNoise, predicted_fit_std
 from ropod_sysid.trajectory.prediction import Prediction, _variant_prediction
 from ropod_sysid.trajectory.run_variants import VARIANTS, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
@@ -280,7 +280,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     log_rate : sample rate [Hz] of the logs the fit will use
     eval_rate : rate [Hz] at which the regressor is evaluated (the information is scaled to
         ``log_rate``)
-    sensors : a sensor model (:class:`~ropod_sysid.trajectory.noise.SensorNoise`): the standard
+    sensors : a sensor model (:class:`~ropod_sysid.noise.SensorNoise`): the standard
         deviations are then those the fit will report (its white-noise σ, with σ̂ and the
         rows' correlation predicted from current noise and encoder quantisation), and
         ``noise`` and ``log_rate`` are not used
@@ -394,8 +394,8 @@ def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, mo
     """A_ID,ext (4M, 3, p) of the four variants (twists (4, N, 3) on the grid of ``fine``,
     predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for.
     With ``noise`` = (true parameters, sensors) A is returned with the rows' variances (4M, 3)
-    and the error gram of A (:func:`ropod_sysid.trajectory.noise.row_variances`,
-    :func:`~ropod_sysid.trajectory.noise.regressor_error_gram`)."""
+    and the error gram of A (:func:`ropod_sysid.noise.row_variances`,
+    :func:`~ropod_sysid.noise.regressor_error_gram`)."""
     dt = float(np.median(np.diff(fine.t)))
     step = max(int(round(1.0 / (eval_rate * dt))), 1)
     idx = np.arange(0, fine.n_samples, step)

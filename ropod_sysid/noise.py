@@ -1,4 +1,4 @@
-"""What sensor noise does to a fit, predicted before the run (issue: excitation that earns it).
+"""What sensor noise does to a fit: predicted before a run, and corrected in the fit.
 
 A fit's white-noise standard deviations (:func:`ropod_sysid.solve.solve`) are
 σ̂ √(c diag((ÃᵀÃ)⁻¹)): Ã the equation rows with the θ rows weighted by w (Sec. VI-A), σ̂² their
@@ -328,3 +328,18 @@ def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,
         bias = np.full_like(truth, np.nan)
         bias[inside] = -np.linalg.solve(flat.T @ flat + e_in, (err @ truth)[inside])
     return std * math.sqrt(noise.grid.correlation), bias, s, w_rot
+
+
+def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts: int,
+                   friction: str = "per-wheel") -> np.ndarray:
+    """E[δAᵀδA] (3, p, p) of the equation rows at samples ``index`` of a preprocessed block
+    ``pre`` (:class:`ropod_sysid.regressor.Preprocessed`) for encoders of ``encoder_counts``
+    per revolution (:func:`regressor_error_gram` at the measured states): what ``fit
+    --encoder-counts`` subtracts from the normal equations (corrected least squares)."""
+    from ropod_sysid.regressor import row_inputs
+
+    rows = row_inputs(pre, index)  # type: ignore[arg-type]
+    st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
+    noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
+                        row_step=pre.grid.step)  # type: ignore[attr-defined]
+    return regressor_error_gram(model, st, noise, friction, qdd=rows.qdd)
