@@ -168,12 +168,11 @@ def test_fit_corrects_the_encoders_bias_on_the_shipped_sample():
     parameters comes within 0.5 %, every value within 2σ of the truth."""
     import glob
     import json
+    from pathlib import Path
 
     from ropod_sysid.fit import FitOptions, fit_files
     from ropod_sysid.platform import load_platform
     from ropod_sysid.summary import compared_values
-
-    from pathlib import Path
 
     sample = Path(__file__).resolve().parents[1] / "datasets" / "ropod"
     platform = load_platform(sample / "platform.yaml")
