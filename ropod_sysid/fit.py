@@ -181,6 +181,18 @@ class FitResult:
                 "down_weighted": [{"file": f, "from_s": a, "to_s": b, "weight": round(x, 4)}
                                   for f, a, b, x in self.down_weighted()]}
 
+    def corrections_text(self) -> str:
+        """One line on the corrections the fit applied ('' for none)."""
+        o = self.options
+        parts = []
+        if o.encoder_counts:
+            parts.append(f"Corrected for the errors of {o.encoder_counts}-count encoders in "
+                         "A_ID,ext (AᵀA − E[δAᵀδA], --encoder-counts)")
+        if o.control_period:
+            parts.append(f"The drives hold each torque {1000 * o.control_period:g} ms: half of "
+                         "it is in the input delay (--control-period)")
+        return "; ".join(parts)
+
     def robust_text(self) -> str:
         """One line on what ``--robust`` did ('' for a plain fit)."""
         w = self.solution.stretch_weights

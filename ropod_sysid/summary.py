@@ -157,6 +157,8 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
     lines.append(f"std: {sol.std_basis}")
     if result.robust_text():
         lines.append(result.robust_text())
+    if result.corrections_text():
+        lines.append(result.corrections_text())
     if sol.note:
         lines.append(f"note: {sol.note}")
     sol = result.solution

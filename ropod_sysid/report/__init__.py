@@ -125,9 +125,13 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
         and robust_extra.get("method") in ROBUST_METHODS else "none"
     counts = pfile.extras.get("encoder_counts")
     counts = int(counts) if isinstance(counts, int) and not isinstance(counts, bool) else None
+    period = pfile.extras.get("control_period_s")
+    period = float(period) if isinstance(period, int | float) and not isinstance(
+        period, bool) and math.isfinite(period) and 0 <= period <= 0.05 else 0.0
+    # (the file's input_delay_s already holds half the control period; for the account only)
     options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
                          row_step=row_step, robust=robust,  # type: ignore[arg-type]
-                         encoder_counts=counts)
+                         encoder_counts=counts, control_period=period)
 
     check_distinct([log for log in logs if not isinstance(log, Log)])
     for log in logs:
@@ -424,6 +428,7 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
         "model_error_ratio": model_error_ratio(result),
         "physical_note": result.shown.note,
         "robust_note": result.robust_text(),
+        "corrections_note": result.corrections_text(),
         "span": str(result.options.span),
         "friction": result.options.friction,
         "rms": rms,
