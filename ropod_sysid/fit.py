@@ -22,6 +22,7 @@ from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.units import FRICTION_VARIANTS
+from ropod_sysid.noise import counts_note, detect_encoder_counts
 from ropod_sysid.params import (
     DISSIPATIVE_SIGN,
     UNITS_OF,
@@ -550,9 +551,11 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
+            note = counts_note(log.source, detect_encoder_counts(
+                log.angles, np.asarray(platform.layout.wrapped)), options.encoder_counts)
             out.append((log.source, triangles(model, pre, options.friction,
                                               encoder_counts=options.encoder_counts),
-                        pre.notes, None))
+                        pre.notes + ([note] if note else []), None))
         return out
 
     return _fit(reduce, platform, options)

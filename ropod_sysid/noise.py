@@ -343,3 +343,52 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
                         row_step=pre.grid.step)  # type: ignore[attr-defined]
     return regressor_error_gram(model, st, noise, friction, qdd=rows.qdd)
+
+
+def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None) -> int | None:
+    """The counts per revolution of encoders whose angles (N, J) [rad] move by whole counts,
+    or None when they do not (exact or resampled angles). The count is the smallest step of
+    any channel (or its half or third, when that step is two or three counts), refined on the
+    steps of up to 50 counts, accepted when 99 % of the steps are whole numbers of it (to 0.1
+    count: a log written with 8 digits rounds its angles) and 2π is a whole number of it (to
+    0.1 %). ``wrapped`` (J,): channels wrapped to ±π, whose steps across the
+    wrap are taken modulo 2π."""
+    a = np.asarray(angles, float)
+    if a.ndim != 2 or a.shape[0] < 3:
+        return None
+    d = np.diff(a, axis=0)
+    if wrapped is not None and np.any(wrapped):
+        w = np.asarray(wrapped, bool)
+        d[:, w] = np.angle(np.exp(1j * d[:, w]))
+    steps = np.abs(d[np.abs(d) > 1e-12])
+    if steps.size < 10:
+        return None
+    smallest = float(steps.min())
+    for div in (1, 2, 3):
+        q = smallest / div
+        # refined on the small steps (a log written with 8 digits rounds each angle)
+        k = np.round(steps / q)
+        small = (k >= 1) & (k <= 50)
+        if not small.any():
+            continue
+        q = float(steps[small].sum() / k[small].sum())
+        ratio = steps / q
+        if np.mean(np.abs(ratio - np.round(ratio)) < 0.1) < 0.99:
+            continue
+        counts = 2.0 * math.pi / q
+        if abs(counts - round(counts)) < 1e-3 * counts and round(counts) >= 16:
+            return int(round(counts))
+    return None
+
+
+def counts_note(source: str, detected: int | None, given: int | None) -> str | None:
+    """The note on a log whose angles move by whole counts of its encoders
+    (:func:`detect_encoder_counts`) when the fit was not told them, or was told others."""
+    if detected is None or detected == given:
+        return None
+    if given is None:
+        return (f"{source}: the angles move by whole counts of 2π/{detected}; give "
+                f"--encoder-counts {detected} to correct the fit for the encoders' "
+                "quantisation (its errors in the accelerations shrink the values)")
+    return (f"{source}: the angles move by whole counts of 2π/{detected}, not of the "
+            f"--encoder-counts {given} given; check the encoders' resolution")

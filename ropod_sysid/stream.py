@@ -373,7 +373,13 @@ class _Run:
 
     def push(self, log: Log) -> None:
         if not self.raw:
+            from ropod_sysid.noise import counts_note, detect_encoder_counts
+
             self.t0 = float(log.t[0])
+            note = counts_note(self.name, detect_encoder_counts(
+                log.angles, np.asarray(log.layout.wrapped)), self.blocks.encoder_counts)
+            if note is not None:
+                self.notes.append(note)
         self.raw += log.n_samples
         self.t1 = float(log.t[-1])
         self.notes.extend(n for n in log.notes if n not in self.notes)  # (MCAP damage: last)
