@@ -414,20 +414,23 @@ def test_report_command_compares_with_a_flat_truth_mapping(files, tmp_path):
     assert "flat_truth.json" in out.read_text(encoding="utf-8")
 
 
-def test_figures_drawn_by_workers_are_those_drawn_here(sim, truth_file, full_html):
-    """The report's figures drawn by two forked workers (the default on two CPUs) and in this
-    process are the same bytes; a figure that fails in a worker fails the report, with the
-    worker's error, and ends the workers."""
+def test_figures_drawn_by_workers_are_those_drawn_here(sim):
+    """A figure drawn by two forked workers (the default on two CPUs) and in this process is
+    the same bytes (so is the report); a figure that fails in a worker fails with the
+    worker's error, and the workers end."""
     from ropod_sysid.report import painter
 
-    platform, _, logs, result = sim
+    platform = sim[0]
+    t = np.linspace(0.0, 5.0, 500)
+    b = np.column_stack([np.sin(t), np.cos(t), 0.1 * t])
+    with painter.Painter(1) as one:
+        here = one.draw("fit_vs_measured", t, b, 0.9 * b).uri()
+        hist = one.draw("residual_histograms", b).uri()
     if painter.default_workers() < 2:
-        pytest.skip("one CPU or no fork here: every report is drawn in this process")
-    # full_html was drawn by the default two workers
-    here = render_fit_report(result, logs[:2], compare=truth_file, compare_label="truth.json",
-                             validation_logs=[logs[2]], workers=1)
-    assert here == full_html
-    with painter.Painter(2) as p:
+        pytest.skip("one CPU or no fork here: every figure is drawn in this process")
+    with painter.Painter(2, platform.layout) as p:
+        assert p.draw("fit_vs_measured", t, b, 0.9 * b).uri() == here
+        assert p.draw("residual_histograms", b).uri() == hist
         drawn = p.draw("residual_histograms", "not an array")
         with pytest.raises(Exception, match="not an array|index|dimension|shape|str"):
             drawn.uri()
