@@ -118,7 +118,7 @@ def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
     for the compiled loop names the platform's types."""
     pf = mixed_platform()
     truth = Parameters(dict(typical_parameters(pf, 30.0, 3.0)) | {"Jrot_o": 0.004})
-    runs = four_variants(1.0)[:1]  # 1000 steps: long enough for the compiled loop
+    runs = four_variants(0.6)[:1]  # 600 steps: long enough for the compiled loop
     ref = simulate(pf, truth, runs, engine="numpy")
     monkeypatch.delattr(OmniUnits, "compiled")
     assert_identical(simulate(pf, truth, runs), ref)
@@ -130,7 +130,7 @@ def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
 
 def test_numpy_fallback_without_numba(monkeypatch, off_square) -> None:
     truth = thesis_fixed_masses(off_square.unit_names)
-    runs = four_variants(1.0)[:1]
+    runs = four_variants(0.6)[:1]  # 600 steps: the compiled loop's under auto
     ref = simulate(off_square, truth, runs, engine="numpy")
     simulate(off_square, truth, runs, engine="numba")  # ropod_sysid.simulate_jit imported
     monkeypatch.setitem(sys.modules, "numba", None)  # import numba raises ImportError

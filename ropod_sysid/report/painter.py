@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import multiprocessing
 import os
+import sys
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -72,8 +73,11 @@ class Painter:
         n = default_workers() if workers is None else workers
         if n < 1:
             raise ValueError(f"workers {n}: at least 1")
-        self.pool = (multiprocessing.get_context("fork").Pool(n, _warm, (layout,))
-                     if n > 1 else None)
+        # a parent that has drawn before passes its fonts and figures on through the fork:
+        # the workers then need no warming up
+        warm = "ropod_sysid.report.figures" not in sys.modules
+        self.pool = (multiprocessing.get_context("fork").Pool(
+            n, _warm if warm else None, (layout,) if warm else ()) if n > 1 else None)
 
     def draw(self, name: str, *args: Any) -> Drawn:
         """The figure ``figures.<name>(*args)`` (PNG bytes), drawn now or by a worker."""
