@@ -23,6 +23,7 @@ from ropod_sysid.cli.common import (
 from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.trajectory import MAX_HARMONICS, OPTIMIZE_DURATION, TYPICAL_MAX_DURATION
+from ropod_sysid.trajectory.excitation import OBJECTIVES
 
 OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
              "negated": "negated.csv", "mirrored_negated": "mirrored_negated.csv"}
@@ -203,7 +204,7 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @click.option("--harmonics", default=5, show_default=True,
               type=Number(1, MAX_HARMONICS, integer=True),
               help="Harmonics of each Fourier series.")
-@click.option("--objective", type=click.Choice(["sigma", "cond", "logdet"]), default="sigma",
+@click.option("--objective", type=click.Choice(OBJECTIVES), default=OBJECTIVES[0],
               show_default=True,
               help="sigma: least predicted error of the --target parameters under the sensor "
                    "model (the fit's σ and the encoders' bias, as 'trajectory check' predicts "
