@@ -35,7 +35,7 @@ from tests.test_cli import one_line_error
 # ROPOD_FUZZ=random (and ROPOD_FUZZ_EXAMPLES) to search afresh while developing.
 _RANDOM = os.environ.get("ROPOD_FUZZ") == "random"
 FUZZ = settings(
-    max_examples=int(os.environ.get("ROPOD_FUZZ_EXAMPLES", "50")),
+    max_examples=int(os.environ.get("ROPOD_FUZZ_EXAMPLES", "30")),
     derandomize=not _RANDOM, database=None, deadline=None,  # time is bounded by the property
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )

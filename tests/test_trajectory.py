@@ -222,14 +222,14 @@ def test_check_reports_violations_as_findings(ropod):
 @pytest.fixture(scope="module")
 def ropod_pair(ropod):
     d = 20.0
-    return typical(duration=d), optimize(ropod, duration=d, maxiter=8, seed=0, objective="cond")
+    return typical(duration=d), optimize(ropod, duration=d, maxiter=5, seed=0, objective="cond")
 
 
 @pytest.fixture(scope="module")
 def off_pair(off_square):
     d = 10.0
     return (typical(duration=d, platform=off_square),
-            optimize(off_square, duration=d, maxiter=8, seed=0, objective="cond"))
+            optimize(off_square, duration=d, maxiter=5, seed=0, objective="cond"))
 
 
 def test_optimize_beats_typical_on_the_ropod(ropod, ropod_pair):
