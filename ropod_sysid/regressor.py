@@ -34,7 +34,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_angles
 from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
-from ropod_sysid.solve import STRETCH_S, Triangles, qr_triangle, stretch_grams
+from ropod_sysid.solve import STRETCH_S, Triangles, kind_rows, per_row, qr_triangle, stretch_grams
 from ropod_sysid.tracker import with_fused_pose
 
 DEFAULT_SPAN_S = 0.1
@@ -376,14 +376,19 @@ def derivatives(model: PlatformModel, angles_s: np.ndarray, pose_s: np.ndarray |
     """The recipe's step after smoothing (Sec. VI-B), shared by the in-memory and streamed
     paths: the pose by odometry from the smoothed angles (or the smoothed tracker pose), its
     central differences, and the angle rates. Returns (q, q̇, q̈, angle rates, unwrapping
-    corrections of the angles)."""
+    corrections of the angles); q̈ (N, D) holds the base's and then the units' own coordinates'
+    accelerations (the steered wheels' β̈)."""
     if pose_s is None:
         q, corr = odometry_from(model, angles_s, odometry_start)
     else:
         q, corr = pose_s, np.zeros_like(angles_s)
     qd = signals.central_difference(q, dt)
     qdd = signals.central_difference(qd, dt)
-    return q, qd, qdd, signals.central_difference(angles_s, dt), corr
+    rates = signals.central_difference(angles_s, dt)
+    if model.n_dof > 3:
+        own = signals.central_difference(rates[:, model.coordinate_channels], dt)
+        qdd = np.concatenate([qdd, own], axis=1)
+    return q, qd, qdd, rates, corr
 
 
 def preprocess(log: Log, platform: Platform, span: Span | None = None,
@@ -452,10 +457,7 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
     """
     st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
     a = model.a_id_ext(st, pre.qdd, friction)
-    if pre.tau.ndim == 3:  # b_ID = B_τ τ (eq. 35) per node delay
-        b = np.einsum("nca,nak->nck", st.b_tau, pre.tau)
-    else:
-        b = model.b_id(st, pre.tau)
+    b = model.b_id(st, pre.tau)  # b_ID = B_τ τ (eq. 35), per node delay if τ has them
     rest = at_rest(pre)
     if rest.any():
         a[rest] = 0.0
@@ -522,26 +524,27 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: in
     ``stretch_rows`` also the stretches' normal-equation pieces
     (:func:`ropod_sysid.solve.stretch_grams`; the block's first row is the log's row
     ``first_row``)."""
-    m, _, p = a.shape
-    b = b.reshape(m, 3, -1)  # (m, 3, n): b_ID at n node delays (DelayBracket)
+    m, d_rows, p = a.shape
+    b = b.reshape(m, d_rows, -1)  # (m, D, n): b_ID at n node delays (DelayBracket)
     w = p + b.shape[2]
-    full = m // QR_LEAF_ROWS * QR_LEAF_ROWS
     r = np.empty((3, w, w))
-    rows = np.empty((m, w))
     idle = m - int(np.count_nonzero(np.abs(a).sum(axis=(1, 2)) + np.abs(b).sum(axis=(1, 2))))
+    ab = np.concatenate([a, b], axis=2)
     for d in range(3):
-        rows[:, :p] = a[:, d, :]
-        rows[:, p:] = b[:, d]
+        rows = kind_rows(ab, d)  # (m·n_d, w): the rows of this kind, sample by sample
+        per = rows.shape[0] // m if m else 1
+        leaf = QR_LEAF_ROWS * per
+        full = rows.shape[0] // leaf * leaf
         parts = []
         if full:
-            leaves = np.linalg.qr(rows[:full].reshape(-1, QR_LEAF_ROWS, w), mode="r")
+            leaves = np.linalg.qr(rows[:full].reshape(-1, leaf, w), mode="r")
             parts.append(leaves.reshape(-1, w))
-        if m > full:
+        if rows.shape[0] > full:
             parts.append(rows[full:])
         r[d] = qr_triangle(np.vstack(parts))
     stretches = [stretch_grams(a, b, first_row, stretch_rows)] if stretch_rows else []
     return Triangles(r, m, label, stretches=stretches, stretch_rows=stretch_rows,
-                     idle=idle)  # (zero rows, at rest, carry no equation)
+                     idle=idle, per_row=per_row(d_rows))  # (zero rows, at rest, carry no equation)
 
 
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",

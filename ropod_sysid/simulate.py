@@ -63,14 +63,29 @@ class ForceSchedule:
 
 @dataclass(frozen=True)
 class Controller:
-    """Per-wheel PI speed loops with a torque limit (no dynamic model).
+    """Per-wheel PI speed loops with a torque limit (no dynamic model), and PD loops on the
+    angle of position-controlled actuators (a steered wheel's steering, 001 eq. 25).
 
-    kp [N m s/rad], ki [N m/rad], torque_limit [N m].
+    kp [N m s/rad], ki [N m/rad], torque_limit [N m]: the speed loops (001 eq. 24: D_r, P_r).
+    steer_kp [N m s/rad], steer_ki [N m/rad], steer_torque_limit [N m]: D_s, P_s of the
+    steering loops and their limit.
     """
 
     kp: float = 1.5
     ki: float = 15.0
     torque_limit: float = 4.0
+    steer_kp: float = 40.0
+    steer_ki: float = 800.0
+    steer_torque_limit: float = 129.0
+
+    def gains(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kp, ki, limit) per actuator (A,), ``position`` marking the position-controlled."""
+        return (np.where(position, self.steer_kp, self.kp),
+                np.where(position, self.steer_ki, self.ki),
+                np.where(position, self.steer_torque_limit, self.torque_limit))
+
+
+BAUMGARTE = 50.0  # [1/s] the simulator's pull back onto constraints it does not eliminate
 
 
 @dataclass(frozen=True)
@@ -210,8 +225,9 @@ def simulate(platform: Platform, params: DynamicParameters,
     else:
         ang0 = np.broadcast_to(np.asarray(initial, float), (n_runs, n_ang)).copy()
 
+    n_dof = model.n_dof
     q = np.zeros((n_runs, 3))
-    qd = np.zeros((n_runs, 3))
+    qd = np.zeros((n_runs, n_dof))  # the base twist, then the units' own coordinates' rates
     angles = ang0
     integ = np.zeros((n_runs, n_act))
 
@@ -227,12 +243,13 @@ def simulate(platform: Platform, params: DynamicParameters,
     def deriv(q: np.ndarray, qd: np.ndarray, angles: np.ndarray, tau: np.ndarray,
               f_b: np.ndarray | None, st: State | None = None) -> tuple[np.ndarray, ...]:
         st = st if st is not None else model.state(q, qd, angles)
-        qdd = model.forward_dynamics(st, params, tau, f_b, friction)
-        return qd, qdd, st.angle_rate
+        qdd = model.forward_dynamics(st, params, tau, f_b, friction, stabilize=BAUMGARTE)
+        return qd[:, :3], qdd, st.angle_rate
 
     # setpoints and external force on the step grid, interpolated once: (steps + 1, runs, 3)
     grid = t0[None, :] + dt * np.arange(steps + 1)[:, None]
     sp_all = np.stack([r.at(grid[:, k]) for k, r in enumerate(runs)], axis=1)
+    sp_rate = np.gradient(sp_all, dt, axis=0) if steps else np.zeros_like(sp_all)
     f_all = None if force is None else np.stack([force.at(grid[:, k]) for k in range(n_runs)],
                                                 axis=1)
 
@@ -248,24 +265,25 @@ def simulate(platform: Platform, params: DynamicParameters,
                 steps, np.minimum((n_keep - 1) * stride, steps), sp_all, f_all, ang0, n_act,
                 records, bar)
         else:
+            kp, ki, limit = None, None, None
             for step in range(steps + 1):
                 # controller (zero-order hold over the step): IK for the current unit angles
-                sp = sp_all[step]
-                c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
-                qd_set = np.stack([c * sp[:, 0] - s * sp[:, 1], s * sp[:, 0] + c * sp[:, 1],
-                                   sp[:, 2]], axis=-1)
                 st = model.state(q, qd, angles)
-                want = model.actuator_rates(q, qd_set, angles)
+                want, angle_err = model.setpoints(q, sp_all[step], sp_rate[step], angles)
+                if kp is None:
+                    kp, ki, limit = controller.gains(~np.isnan(angle_err[0]))
                 err = want - st.actuator_rate
-                tau_raw = controller.kp * err + controller.ki * (integ + err * dt)
-                tau = np.clip(tau_raw, -controller.torque_limit, controller.torque_limit)
+                # PI on the rate (the integral), or PD on the angle (its error given)
+                held = np.where(np.isnan(angle_err), integ + err * dt, angle_err)
+                tau_raw = kp * err + ki * held
+                tau = np.clip(tau_raw, -limit, limit)
                 saturated = tau != tau_raw
                 integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
                 f_b = None if f_all is None else f_all[step]
                 k1 = deriv(q, qd, angles, tau, f_b, st)
                 if step % stride == 0:
                     k = step // stride
-                    rec_q[k], rec_qd[k], rec_qdd[k] = q, qd, k1[1]
+                    rec_q[k], rec_qd[k], rec_qdd[k] = q, qd[:, :3], k1[1][:, :3]
                     rec_ang[k], rec_tau[k] = angles, tau
                     if f_b is not None:
                         rec_fb[k] = f_b

@@ -64,14 +64,27 @@ def node_weights(nodes: np.ndarray, delay: float, order: int = 1) -> np.ndarray:
     return w
 
 
+def row_kinds(n_dof: int) -> np.ndarray:
+    """The triangle (0: x, 1: y, 2: θ) of each of the D rows of a sample: the units' own
+    coordinates (the steered wheels' β, torques in N m) join the θ rows."""
+    return np.minimum(np.arange(n_dof), 2)
+
+
+def kind_rows(rows: np.ndarray, kind: int) -> np.ndarray:
+    """The rows (m, D, w) of one kind as (m·n_kind, w), sample by sample."""
+    sel = row_kinds(rows.shape[1]) == kind
+    picked = rows[:, sel]
+    return picked.reshape(-1, rows.shape[2])
+
+
 def stretch_grams(a: np.ndarray, b: np.ndarray, first_row: int, stretch_rows: int,
                   ) -> np.ndarray:
     """(K, 2, p+1, p+1): [A b]ᵀ[A b] of the x and y rows together and of the θ rows of A
     (m, 3, p) and b (m, 3), per stretch of ``stretch_rows`` rows counted from row 0 of the log,
     the block's first row being row ``first_row`` (the first and last stretch of the block may
     be partial; :meth:`Triangles.merge` joins them with the neighbouring blocks')."""
-    m, _, p = a.shape
-    b = b.reshape(m, 3, -1)  # (m, 3, n): b at n node delays (Triangles.delays)
+    m, d, p = a.shape
+    b = b.reshape(m, d, -1)  # (m, D, n): b at n node delays (Triangles.delays)
     w = p + b.shape[2]
     cuts = np.arange(stretch_rows - first_row % stretch_rows, m, stretch_rows)
     edges = np.concatenate([[0], cuts, [m]])
@@ -79,9 +92,15 @@ def stretch_grams(a: np.ndarray, b: np.ndarray, first_row: int, stretch_rows: in
     for i, (s, e) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
         ab = np.concatenate([a[s:e], b[s:e]], axis=2)
         xy = ab[:, :2].reshape(-1, w)
+        rot = ab[:, 2:].reshape(-1, w)
         out[i, 0] = xy.T @ xy
-        out[i, 1] = ab[:, 2].T @ ab[:, 2]
+        out[i, 1] = rot.T @ rot
     return out
+
+
+def per_row(n_dof: int) -> tuple[int, int, int]:
+    """Rows of each kind per sample for D generalized coordinates."""
+    return (1, 1, n_dof - 2)
 
 
 def stack_triangles(triangles: Sequence[np.ndarray]) -> np.ndarray:
@@ -93,8 +112,9 @@ def stack_triangles(triangles: Sequence[np.ndarray]) -> np.ndarray:
 class Triangles:
     """QR triangles of one stacked system (a log), one per DOF row of the direct EOM.
 
-    r : (3, p+1, p+1) triangles of [A_dof | b_dof] for dof = x, y, θ
-    rows : equation rows per DOF
+    r : (3, p+1, p+1) triangles of [A_dof | b_dof] for dof = x, y, θ (the θ triangle also
+        holds the rows of the units' own coordinates, :func:`row_kinds`)
+    rows : equation rows per DOF (samples of rows; ``per_row`` rows of each kind per sample)
     samples : log samples those rows cover (after trimming; ``rows`` × the row step)
     correlation : rows per independent row: the LOESS over the rows makes neighbours share
         their noise (1/Σh² of its kernel h, for a residual white before that filter)
@@ -123,6 +143,7 @@ class Triangles:
     idle: int = 0  # rows at rest: zero rows, no equation (ropod_sysid.regressor.at_rest)
     # E[δA_dᵀ δA_d] (3, p, p) of the encoders' errors in A (fit --encoder-counts), or None
     error_gram: np.ndarray | None = field(default=None, repr=False)
+    per_row: tuple[int, int, int] = (1, 1, 1)  # rows of each kind per sample (row_kinds)
 
     @property
     def equations(self) -> int:
@@ -131,9 +152,10 @@ class Triangles:
 
     @classmethod
     def from_rows(cls, a: np.ndarray, b: np.ndarray, label: str = "") -> Triangles:
-        """From A (N, 3, p) and b (N, 3): one triangle per DOF."""
-        r = np.stack([qr_triangle(a[:, d, :], b[:, d]) for d in range(3)])
-        return cls(r, a.shape[0], label)
+        """From A (N, D, p) and b (N, D): one triangle per kind of row (:func:`row_kinds`)."""
+        ab = np.concatenate([a, b.reshape(*b.shape[:2], -1)], axis=2)
+        r = np.stack([qr_triangle(kind_rows(ab, d)) for d in range(3)])
+        return cls(r, a.shape[0], label, per_row=per_row(a.shape[1]))
 
     def merge(self, other: Triangles) -> Triangles:
         """Append another block of rows of the same system (streaming)."""
@@ -142,7 +164,7 @@ class Triangles:
                          self.correlation, self.duration + other.duration,
                          self._joined_stretches(other), self.stretch_rows or other.stretch_rows,
                          self.delays, self.delay_order, self.idle + other.idle,
-                         _sum_grams(self.error_gram, other.error_gram))
+                         _sum_grams(self.error_gram, other.error_gram), self.per_row)
 
     def at_delay(self, delay: float, stretches: bool = True) -> Triangles:
         """The triangles of one delay [s] from those of the node delays (:attr:`delays`): b_ID
@@ -160,7 +182,7 @@ class Triangles:
         st = [t.T @ s @ t for s in self.stretches] if stretches else []
         return Triangles(r, self.rows, self.label, self.samples, self.correlation,
                          self.duration, st, self.stretch_rows, idle=self.idle,
-                         error_gram=self.error_gram)
+                         error_gram=self.error_gram, per_row=self.per_row)
 
     def _joined_stretches(self, other: Triangles) -> list[np.ndarray]:
         """The stretches of ``other`` (the rows after this block's) after this block's: when
@@ -189,7 +211,8 @@ class Triangles:
 
     def mean_square_b(self) -> np.ndarray:
         """Mean square of b_ID per DOF (3,): ‖b‖² = ‖R e_b‖² (column norms are kept)."""
-        return (self.r[:, :, -1] ** 2).sum(axis=1) / max(self.equations, 1)
+        return (self.r[:, :, -1] ** 2).sum(axis=1) / (max(self.equations, 1)
+                                                        * np.array(self.per_row))
 
     def rotation_weight(self) -> float:
         """Sec. VI-A: the weight w of the θ rows making mean(w² b_θ²) = mean(b_x², b_y²)."""
@@ -215,18 +238,20 @@ class Triangles:
         """RMS residual of the direct EOM: translation rows [N] and rotation rows [N m]."""
         ss = self.residual_ss(m)
         n = max(self.equations, 1)
+        rot = n * self.per_row[2]
         return {"translation": float(np.sqrt((ss[0] + ss[1]) / (2 * n))),
-                "rotation": float(np.sqrt(ss[2] / n)),
+                "rotation": float(np.sqrt(ss[2] / rot)),
                 "x": float(np.sqrt(ss[0] / n)), "y": float(np.sqrt(ss[1] / n)),
-                "theta": float(np.sqrt(ss[2] / n))}
+                "theta": float(np.sqrt(ss[2] / rot))}
 
 
 def combined_rms(systems: Sequence[Triangles], m: np.ndarray) -> dict[str, float]:
     """RMS over all stacked samples (translation, rotation), unweighted."""
     ss = sum(s.residual_ss(m) for s in systems)
     n = max(sum(s.equations for s in systems), 1)
+    rot = max(sum(s.equations * s.per_row[2] for s in systems), 1)
     return {"translation": float(np.sqrt((ss[0] + ss[1]) / (2 * n))),
-            "rotation": float(np.sqrt(ss[2] / n))}
+            "rotation": float(np.sqrt(ss[2] / rot))}
 
 
 @dataclass

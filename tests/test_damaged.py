@@ -377,8 +377,8 @@ PLATFORM_CASES = {
                  "name and pivot"),
     "units_not_a_list": ({"units": 0}, "'units' must be a list of {name, pivot} entries, got 0"),
     "unknown_type": ({"unit0_type": "mecanum"},
-                     "'units[0].type' is 'mecanum'; known unit types: swivel, omni — use one of "
-                     "them (or leave 'type' out for swivel)"),
+                     "'units[0].type' is 'mecanum'; known unit types: swivel, omni, steered — use "
+                     "one of them (or leave 'type' out for swivel)"),
     "nan": ({"wheel_radius": float("nan")},
             "key 'wheel_radius' must be finite, got nan; give its value in SI units"),
     "infinite": ({"torque_constant": float("inf")},

@@ -50,7 +50,7 @@ def test_contract_example_loads(tmp_path):
     (lambda d: d["units"][2].update(name="front left"), "'units[2].name'"),
     (lambda d: d["units"][0].update(pivot=[0.1]), "'units[0].pivot' must be two"),
     (lambda d: d["units"][0].update(type="mecanum"),
-     "'units[0].type' is 'mecanum'; known unit types: swivel, omni"),
+     "'units[0].type' is 'mecanum'; known unit types: swivel, omni, steered"),
     (lambda d: d["units"][3].update(sign_left=2), "'units[3].sign_left' must be 1 or -1"),
 ])
 def test_bad_platform_files(tmp_path, edit, message):

@@ -8,8 +8,20 @@ the identification regressor A_ID,ext (eqs. 35, 36, 66) — all from the same pe
 generalized friction force of unactuated joints (the swivel's pivots: B_τfp τ_fp, eq. 64) and,
 with body-axis friction, of the base (:func:`ropod_sysid.model.base.body_friction_force`).
 
-Shapes: q, qd, qdd (N, 3); unit angles (N, J) and actuator torques (N, A) in the platform's
+Shapes: q, qd (N, 3); unit angles (N, J) and actuator torques (N, A) in the platform's
 channel order (:class:`ropod_sysid.platform.Layout`).
+
+Own coordinates and constraints. A unit type may add coordinates of its own (the steered
+wheel's actuated steering angle β: its ``coordinates``) and constraints on the generalized
+velocity that it does not eliminate (the steered wheel's lateral no-slip rows G q̇ = 0). The
+generalized coordinates are then q = (q_b, s): D = 3 + E rows, the base's three first, then the
+groups' own coordinates in platform order; q̈ (N, D), M_dir (N, D, D), B_τ (N, D, A). The
+constraint forces Gᵀλ are removed by the orthogonal projector P = I − G⁺G onto the null space
+of G (seed 001 eqs. 11–15; :func:`null_projector`): P Gᵀ = 0, and P (M q̈ − B_τ(τ + τ_f) − b) = 0
+are the equations of motion and, linear in the parameters, the identification rows
+P A_ID,ext m = P b_ID. P is found by an SVD with a rank tolerance, so a configuration in which
+the constraints lose rank (001 Property 3–4: all wheel axles on one line) gives the right
+projection, never a division by zero. Without constraints P = I and D = 3 for the ropod.
 """
 
 from __future__ import annotations
@@ -41,23 +53,57 @@ def _gather(parts: list[tuple[np.ndarray, np.ndarray]], size: int, axis: int) ->
     return out
 
 
+RANK_TOLERANCE = 1e-9  # singular values of G below this × the largest count as zero
+
+
+def null_projector(g: np.ndarray, n_dof: int) -> np.ndarray:
+    """P = I − G⁺G (N, D, D), the orthogonal projector onto the null space of constraint rows
+    G (N, C, D): by an SVD, singular values below :data:`RANK_TOLERANCE` × the largest
+    dropped (001 eqs. 11–15 with a rank tolerance instead of Algorithm 1's divisions)."""
+    _, sv, vt = np.linalg.svd(g, full_matrices=False)  # vt (N, min(C, D), D)
+    keep = sv > RANK_TOLERANCE * np.maximum(sv[:, :1], np.finfo(float).tiny)
+    v = vt * keep[..., None]
+    return np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
+
+
+def _rows(values: np.ndarray, idx: np.ndarray, size: int, axes: tuple[int, ...] = (1,)
+          ) -> np.ndarray:
+    """A group's rows (its base rows, then its own coordinates') placed at ``idx`` of ``size``
+    along each of ``axes``; zeros elsewhere."""
+    if values.shape[axes[0]] == size and np.array_equal(idx, np.arange(size)):
+        return values
+    shape = list(values.shape)
+    for ax in axes:
+        shape[ax] = size
+    out = np.zeros(shape)
+    sl: list[object] = [slice(None)] * len(shape)
+    if len(axes) == 1:
+        sl[axes[0]] = idx
+        out[tuple(sl)] = values  # type: ignore[index]
+    else:
+        out[:, idx[:, None], idx[None, :]] = values
+    return out
+
+
 @dataclass
 class State:
     """Kinematic data of the whole platform at N samples (pinocchio's "data")."""
 
     q: np.ndarray  # (N, 3)
-    qd: np.ndarray  # (N, 3)
+    qd: np.ndarray  # (N, 3) base twist
     angles: np.ndarray  # (N, J)
     units: list[UnitData]  # one per unit group
     groups: tuple[Group, ...]
     n_angles: int
     n_actuators: int
+    rows: tuple[np.ndarray, ...] = ()  # per group, its rows among the D generalized coordinates
+    n_dof: int = 3
 
     @property
     def b_tau(self) -> np.ndarray:
-        """B_τ (N, 3, A) over every actuator (eq. 32)."""
-        return _gather([(g.currents, d.b_tau) for g, d in zip(self.groups, self.units,
-                                                             strict=True)],
+        """B_τ (N, D, A) over every actuator (eq. 32)."""
+        return _gather([(g.currents, _rows(d.b_tau, r, self.n_dof))
+                        for g, d, r in zip(self.groups, self.units, self.rows, strict=True)],
                        self.n_actuators, 2)
 
     @property
@@ -79,12 +125,12 @@ class State:
 class DirectEOM:
     """The terms of eq. 65 at N samples."""
 
-    m_dir: np.ndarray  # (N, 3, 3)
-    b_fb: np.ndarray  # (N, 3, 3)
-    b_tau: np.ndarray  # (N, 3, A)
-    b_dir: np.ndarray  # (N, 3)
+    m_dir: np.ndarray  # (N, D, D)
+    b_fb: np.ndarray  # (N, D, 3)
+    b_tau: np.ndarray  # (N, D, A)
+    b_dir: np.ndarray  # (N, D)
     tau_f: np.ndarray  # (N, A) friction torques added to the actuator torques (eqs. 56/57)
-    f_f: np.ndarray | None  # (N, 3) other friction, as a generalized force (eq. 64: B_τfp τ_fp)
+    f_f: np.ndarray | None  # (N, D) other friction, as a generalized force (eq. 64: B_τfp τ_fp)
 
     def generalized_force(self, tau: np.ndarray, f_b: np.ndarray | None = None) -> np.ndarray:
         """Right-hand side of eq. 65 for actuator torques τ (N, A) and F_b (N, 3)."""
@@ -112,21 +158,70 @@ class PlatformModel:
         self.groups: list[tuple[Group, object]] = [
             (g, g.type.from_specs(g.specs, self.alpha)) for g in platform.groups]
         self._columns: dict[str, list[tuple[np.ndarray | slice, np.ndarray | slice]]] = {}
+        # the units' own coordinates: per group its rows among the D, and their angle channels
+        rows, channels, extra = [], [], 3
+        for g, _ in self.groups:
+            own = tuple(getattr(g.type, "coordinates", ()))
+            k = len(g.specs)
+            rows.append(np.concatenate([np.arange(3), extra + np.arange(k * len(own))]))
+            per = g.angles.reshape(k, -1)
+            channels.append(per[:, list(own)].reshape(-1) if own else np.zeros(0, int))
+            extra += k * len(own)
+        self.rows = tuple(rows)
+        self.n_dof = extra  # D = 3 + E
+        self.coordinate_channels = np.concatenate(channels).astype(int)  # (E,) angle channels
+        self.constrained = any(hasattr(u, "constraint_jacobian") for _, u in self.groups)
+
+    @property
+    def row_kinds(self) -> np.ndarray:
+        """Per generalized coordinate (D,): 0, 1 for x, y (forces [N]), 2 for θ and the units'
+        own angles (torques [N m]): the rows that share one triangle and one weight."""
+        return np.array([0, 1] + [2] * (self.n_dof - 2))
 
     # ------------------------------------------------------------ kinematics
     def state(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
               angle_rates: np.ndarray | None = None) -> State:
         """Kinematics of every unit group for base motion (q, qd) and unit angles (N, J);
-        ``angle_rates`` (N, J) are the measured rates where a type uses them."""
+        ``angle_rates`` (N, J) are the measured rates where a type uses them. ``qd`` may be
+        the whole generalized velocity (N, D): its columns after the base twist are the rates
+        of the units' own coordinates (the simulator's states); else they are taken from
+        ``angle_rates``."""
         q = np.atleast_2d(np.asarray(q, float))
         qd = np.atleast_2d(np.asarray(qd, float))
         angles = np.atleast_2d(np.asarray(angles, float))
+        own = qd[:, 3:] if qd.shape[1] > 3 else None
+        qd = qd[:, :3]
         units = []
-        for g, unit in self.groups:
+        for (g, unit), rows in zip(self.groups, self.rows, strict=True):
             rates = None if angle_rates is None else _take(angle_rates, g.angles, 1)
-            units.append(unit.kinematics(q, qd, _take(angles, g.angles, 1), rates))
+            if rows.size > 3:
+                coord = None if own is None else own[:, rows[3:] - 3]
+                units.append(unit.kinematics(q, qd, _take(angles, g.angles, 1), rates,
+                                             coordinate_rates=coord))
+            else:
+                units.append(unit.kinematics(q, qd, _take(angles, g.angles, 1), rates))
         return State(q, qd, angles, units, tuple(g for g, _ in self.groups),
-                     self.layout.n_angles, self.layout.n_currents)
+                     self.layout.n_angles, self.layout.n_currents, self.rows, self.n_dof)
+
+    def constraints(self, st: State) -> tuple[np.ndarray, np.ndarray] | None:
+        """The constraint rows G (N, C, D) the units do not eliminate (the steered wheels'
+        lateral no-slip) and Ġ q̇ (N, C); None without any."""
+        if not self.constrained:
+            return None
+        parts = [unit.constraint_jacobian(data)
+                 for (_, unit), data in zip(self.groups, st.units, strict=True)
+                 if hasattr(unit, "constraint_jacobian")]
+        rows = [r for (_, unit), r in zip(self.groups, self.rows, strict=True)
+                if hasattr(unit, "constraint_jacobian")]
+        g = np.concatenate([_rows(p[0], r, self.n_dof, (2,)) for p, r in zip(parts, rows,
+                                                                           strict=True)],
+                           axis=1)
+        return g, np.concatenate([p[1] for p in parts], axis=1)
+
+    def projector(self, st: State) -> np.ndarray | None:
+        """P = I − G⁺G (N, D, D) onto the motions the constraints allow (None: unconstrained)."""
+        con = self.constraints(st)
+        return None if con is None else null_projector(con[0], self.n_dof)
 
     def angle_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Rates of the unit angles implied by the base motion (N, J) (for the swivel: δ̇ of
@@ -141,6 +236,27 @@ class PlatformModel:
         parts = [(g.currents, u.actuator_rates(q, qd, _take(angles, g.angles, 1)))
                  for g, u in self.groups]
         return _gather(parts, self.layout.n_currents, 1)
+
+    def setpoints(self, q: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray,
+                  angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The low-level controllers' setpoints for base-frame twists (N, 3) and their rates:
+        actuator-rate setpoints (N, A), and the angle errors (N, A) of the position-controlled
+        actuators (the steered wheels' steering, 001 eq. 25), NaN where an actuator is
+        speed-controlled (its setpoint from the inverse kinematics, :meth:`actuator_rates`)."""
+        c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+        world = np.stack([c * twist[:, 0] - s * twist[:, 1], s * twist[:, 0] + c * twist[:, 1],
+                          twist[:, 2]], axis=-1)
+        rates, errors = [], []
+        for g, u in self.groups:
+            ang = _take(angles, g.angles, 1)
+            if hasattr(u, "controller_setpoints"):
+                r, e = u.controller_setpoints(twist, twist_rate, ang)
+            else:
+                r, e = u.actuator_rates(q, world, ang), None
+            rates.append((g.currents, r))
+            errors.append((g.currents, np.full_like(r, np.nan) if e is None else e))
+        n_a = self.layout.n_currents
+        return _gather(rates, n_a, 1), _gather(errors, n_a, 1)
 
     def initial_angles(self, twist: np.ndarray) -> np.ndarray:
         """Unit angles (J,) at rest before a first motion with base-frame twist (3,)."""
@@ -167,32 +283,62 @@ class PlatformModel:
     def direct_eom(self, st: State, params: object,
                    friction: Friction = "per-wheel") -> DirectEOM:
         """M_dir, B_Fb, B_τ, b_dir and the friction terms (eqs. 32, 64, 65)."""
-        n = st.q.shape[0]
-        m_dir = base.m_b(params["m_b"], params["Jzz_b"], n)  # (49): M_dir = M_b + Σ M_i,add
-        b_dir = np.zeros((n, 3))
-        for (_, unit), data in zip(self.groups, st.units, strict=True):
+        n, d = st.q.shape[0], self.n_dof
+        m_dir = _rows(base.m_b(params["m_b"], params["Jzz_b"], n), np.arange(3), d, (1, 2))
+        b_dir = np.zeros((n, d))  # (49): M_dir = M_b + Σ M_i,add
+        for (_, unit), data, rows in zip(self.groups, st.units, self.rows, strict=True):
             m_add, b_add = unit.mass_terms(data, params)
-            m_dir = m_dir + m_add
-            b_dir = b_dir + b_add
+            m_dir = m_dir + _rows(m_add, rows, d, (1, 2))
+            b_dir = b_dir + _rows(b_add, rows, d)
         tau_f, f_f = self.friction(st, params, friction)
-        return DirectEOM(m_dir, base.b_fb(st.q[:, 2]), st.b_tau, b_dir, tau_f, f_f)
+        if f_f is not None:
+            f_f = _rows(f_f, np.arange(3), d)
+        return DirectEOM(m_dir, _rows(base.b_fb(st.q[:, 2]), np.arange(3), d), st.b_tau, b_dir,
+                         tau_f, f_f)
 
     def forward_dynamics(self, st: State, params: object, tau: np.ndarray,
                          f_b: np.ndarray | None = None,
-                         friction: Friction = "per-wheel") -> np.ndarray:
-        """q̈_b = M_dir⁻¹ (B_Fb F_b + B_τ (τ + τ_f) + f_f + b_dir) (eqs. 33, 65)."""
+                         friction: Friction = "per-wheel",
+                         stabilize: float = 0.0) -> np.ndarray:
+        """q̈ = M_dir⁻¹ (B_Fb F_b + B_τ (τ + τ_f) + f_f + b_dir) (eqs. 33, 65); (N, D).
+
+        With constraints G q̇ = 0 the accelerations also satisfy G q̈ = −Ġ q̇ − ``stabilize`` G q̇
+        (Baumgarte's term [1/s] against drift): Udwadia and Kalaba's
+        q̈ = a + M⁻¹Gᵀ (G M⁻¹ Gᵀ)⁺ (c − G a), a = M⁻¹ Q, whose pseudo-inverse keeps
+        configurations where G loses rank regular.
+        """
         eom = self.direct_eom(st, params, friction)
         rhs = eom.generalized_force(tau, f_b)
-        return np.linalg.solve(eom.m_dir, rhs[..., None])[..., 0]
+        acc = np.linalg.solve(eom.m_dir, rhs[..., None])[..., 0]
+        con = self.constraints(st)
+        if con is None:
+            return acc
+        g, g_dot_qd = con
+        qd = np.concatenate([st.qd, self.own_rates(st)], axis=1)
+        c = -g_dot_qd - stabilize * np.einsum("ncd,nd->nc", g, qd)
+        m_inv_gt = np.linalg.solve(eom.m_dir, np.swapaxes(g, 1, 2))  # (N, D, C)
+        s_mat = np.einsum("ncd,nde->nce", g, m_inv_gt)
+        lam = np.einsum("nce,ne->nc", np.linalg.pinv(s_mat, rcond=1e-10),
+                        c - np.einsum("ncd,nd->nc", g, acc))
+        return acc + np.einsum("ndc,nc->nd", m_inv_gt, lam)
+
+    def own_rates(self, st: State) -> np.ndarray:
+        """Rates (N, E) of the units' own coordinates at ``st``."""
+        rate = st.angle_rate
+        return rate[:, self.coordinate_channels]
 
     def inverse_dynamics(self, st: State, params: object, qdd: np.ndarray,
                          f_b: np.ndarray | None = None,
-                         friction: Friction = "per-wheel") -> np.ndarray:
-        """Minimum-norm actuator torques τ = B_τ⁺ (M_dir q̈ − B_Fb F_b − f_f − b_dir) − τ_f
-        (eq. 34); (N, A).
+                         friction: Friction = "per-wheel",
+                         torque_max: np.ndarray | None = None) -> np.ndarray:
+        """Actuator torques τ for accelerations q̈ (N, D): the solution of
+        P B_τ (τ + τ_f) = P (M_dir q̈ − B_Fb F_b − f_f − b_dir) that minimises (τ + τ_f)ᵀ W
+        (τ + τ_f) with W = diag(1/τ_max²) (eq. 34; with constraints 001 eqs. 19–23, whose
+        steering torques decouple, eq. 17); W = I when ``torque_max`` (A,) is not given.
+        (N, A). P = I without constraints.
 
-        Friction is compensated: the returned τ plus τ_f is the minimum-norm solution for the
-        total actuator torque, with the other friction moved to the right-hand side.
+        Friction is compensated: the returned τ plus τ_f is the weighted minimum-norm solution
+        for the total actuator torque, with the other friction moved to the right-hand side.
         """
         eom = self.direct_eom(st, params, friction)
         need = np.einsum("ncd,nd->nc", eom.m_dir, qdd) - eom.b_dir
@@ -200,16 +346,23 @@ class PlatformModel:
             need -= eom.f_f
         if f_b is not None:
             need -= np.einsum("ncd,nd->nc", eom.b_fb, f_b)
-        total = np.einsum("nac,nc->na", np.linalg.pinv(eom.b_tau), need)
-        return total - eom.tau_f
+        proj = self.projector(st)
+        b_tau = eom.b_tau
+        if proj is not None:
+            need = np.einsum("nij,nj->ni", proj, need)
+            b_tau = np.einsum("nij,nja->nia", proj, b_tau)
+        return weighted_right_inverse(b_tau, need, torque_max) - eom.tau_f
 
     def disturbance(self, st: State, params: object, qdd: np.ndarray, tau: np.ndarray,
                     friction: Friction = "per-wheel") -> np.ndarray:
         """F_b = B_Fb⁻¹ (M_dir q̈ − B_τ (τ + τ_f) − f_f − b_dir) (eq. 40); (N, 3)."""
         eom = self.direct_eom(st, params, friction)
         resid = np.einsum("ncd,nd->nc", eom.m_dir, qdd) - eom.generalized_force(tau)
+        proj = self.projector(st)
+        if proj is not None:  # the constraint forces Gᵀλ are not a disturbance
+            resid = np.einsum("nij,nj->ni", proj, resid)
         # B_Fb is a rotation about z (det = 1, eq. 3): its inverse is its transpose
-        return np.einsum("ndc,nd->nc", eom.b_fb, resid)
+        return np.einsum("ndc,nd->nc", eom.b_fb[:, :3], resid[:, :3])
 
     def kinetic_energy(self, st: State, params: object) -> np.ndarray:
         """Total kinetic energy of base and units [J]; equals ½ q̇ᵀ M_dir q̇ (App. C)."""
@@ -241,25 +394,38 @@ class PlatformModel:
         or the base's body-axis friction columns.
         """
         check_variant(friction)
-        n = qdd.shape[0]
+        n, d = qdd.shape[0], self.n_dof
         names = self.parameter_names(friction)
-        out = np.empty((n, 3, len(names)))
-        out[:, :, :2] = base.a_id_base(qdd)
-        out[:, :, 2:] = 0.0
+        out = np.zeros((n, d, len(names)))
+        out[:, :3, :2] = base.a_id_base(qdd)
         spots = self._layout(friction)
         shared = self._shared_spots(spots)
-        for (_, unit), data, (inert, fric) in zip(self.groups, st.units, spots, strict=True):
-            out[:, :, inert] += unit.a_id(data, qdd)
-            if friction == "body":
-                continue
-            if isinstance(fric, slice) and fric not in shared:
-                unit.friction_columns(data, friction, out=out[:, :, fric])
+        for (_, unit), data, (inert, fric), rows in zip(self.groups, st.units, spots,
+                                                        self.rows, strict=True):
+            own = rows.size > 3
+            if own:
+                out[(slice(None), *_cells(rows, inert))] += unit.a_id(data, qdd[:, rows])
             else:
-                out[:, :, fric] += unit.friction_columns(data, friction)
+                out[:, :3, inert] += unit.a_id(data, qdd[:, :3])
+            if friction == "body" and not own:
+                continue
+            if own:
+                out[(slice(None), *_cells(rows, fric))] += unit.friction_columns(data, friction)
+            elif isinstance(fric, slice) and fric not in shared:
+                unit.friction_columns(data, friction, out=out[:, :3, fric])
+            else:
+                out[:, :3, fric] += unit.friction_columns(data, friction)
         if friction == "body":
-            out[:, :, len(names) - len(base.BODY_FRICTION):] = base.body_friction_columns(
-                st.q[:, 2], st.qd, self.alpha)
-        return out
+            body = slice(len(names) - len(base.BODY_FRICTION), len(names))
+            out[:, :3, body] = base.body_friction_columns(st.q[:, 2], st.qd, self.alpha)
+        return self._projected(st, out)
+
+    def _projected(self, st: State, rows: np.ndarray) -> np.ndarray:
+        """P rows (N, D, …): the constraint forces removed (unchanged without constraints)."""
+        proj = self.projector(st)
+        if proj is None:
+            return rows
+        return np.einsum("nij,nj...->ni...", proj, rows)
 
     @staticmethod
     def _shared_spots(spots: list[tuple[np.ndarray | slice, np.ndarray | slice]]
@@ -275,14 +441,27 @@ class PlatformModel:
         return twice
 
     def b_id(self, st: State, tau: np.ndarray, f_b: np.ndarray | None = None) -> np.ndarray:
-        """b_ID = B_Fb F_b + B_τ τ (eq. 35); (N, 3). F_b is zero in identification runs."""
-        out = np.einsum("nca,na->nc", st.b_tau, tau)
+        """b_ID = P (B_Fb F_b + B_τ τ) (eq. 35); (N, D). F_b is zero in identification runs;
+        τ (N, A), or (N, A, n) at n node delays (then (N, D, n))."""
+        out = np.einsum("nca,na...->nc...", st.b_tau, tau)
         if f_b is not None:
-            out = out + np.einsum("ncd,nd->nc", base.b_fb(st.q[:, 2]), f_b)
-        return out
+            out[:, :3] += np.einsum("ncd,nd->nc", base.b_fb(st.q[:, 2]), f_b)
+        return self._projected(st, out)
 
     def parameter_names(self, friction: Friction = "per-wheel") -> list[str]:
         return parameter_names(self.platform, friction)
+
+
+def weighted_right_inverse(b: np.ndarray, q_d: np.ndarray,
+                           torque_max: np.ndarray | None = None) -> np.ndarray:
+    """u (N, A) with B u = Q_d (N, D) for B (N, D, A) that minimises uᵀ W u, W =
+    diag(1/τ_max²) (001 eqs. 19–21: u = W⁻¹Bᵀ(B W⁻¹ Bᵀ)⁻¹ Q_d, here by a pseudo-inverse of
+    B W^(−1/2), which also serves a B without full row rank — the projected B_τ — and an
+    inconsistent Q_d, in the least-squares sense). W = I without ``torque_max`` (A,)."""
+    if torque_max is None:
+        return np.einsum("nac,nc->na", np.linalg.pinv(b), q_d)
+    scale = np.asarray(torque_max, float)  # W^(−1/2)
+    return scale * np.einsum("nac,nc->na", np.linalg.pinv(b * scale), q_d)
 
 
 def _take(values: np.ndarray, idx: np.ndarray, axis: int) -> np.ndarray:
@@ -291,6 +470,13 @@ def _take(values: np.ndarray, idx: np.ndarray, axis: int) -> np.ndarray:
     if idx.size == values.shape[axis] and np.array_equal(idx, np.arange(idx.size)):
         return values
     return np.take(values, idx, axis=axis)
+
+
+def _cells(rows: np.ndarray, cols: np.ndarray | slice) -> tuple[np.ndarray, ...] | tuple:
+    """Index of the block rows × cols of an (N, D, p) array (after its sample axis)."""
+    if isinstance(cols, slice):
+        return rows, cols
+    return rows[:, None], cols[None, :]
 
 
 def _spot(idx: list[int]) -> np.ndarray | slice:
