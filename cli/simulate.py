@@ -62,6 +62,13 @@ from ropod_sysid.trajectory import read_trajectory_csv
               help="Wheel speed loop integral gain [N m/rad].")
 @click.option("--torque-limit", default=Controller.torque_limit, show_default=True,
               help="Wheel torque limit [N m].")
+@click.option("--steer-kp", default=Controller.steer_kp, show_default=True,
+              help="Steering loop derivative gain D_s [N m s/rad] (steered units: PD on the "
+                   "steering angle, seed 001 eq. 25).")
+@click.option("--steer-ki", default=Controller.steer_ki, show_default=True,
+              help="Steering loop proportional gain P_s on the angle [N m/rad].")
+@click.option("--steer-torque-limit", default=Controller.steer_torque_limit, show_default=True,
+              help="Steering torque limit [N m].")
 @click.option("--initial-angles", "initial_angles", type=click.Choice(["auto", "zero"]),
               default="auto", show_default=True,
               help="Unit angles at rest. auto: units that turn (swivel pivots) trail the "
@@ -80,12 +87,13 @@ from ropod_sysid.trajectory import read_trajectory_csv
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
             dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
             seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
+            steer_kp: float, steer_ki: float, steer_torque_limit: float,
             initial_angles: str, engine: str, quiet: bool) -> None:
     """Simulate a run of the platform under a velocity controller and write its log."""
     if not out_path.lower().endswith(LOG_SUFFIXES):
         raise InputError(f"--out {out_path}: use a .csv or .mcap file name")
     sensors = Sensors(encoder_counts, current_noise, jitter, seed)
-    controller = Controller(kp, ki, torque_limit)
+    controller = Controller(kp, ki, torque_limit, steer_kp, steer_ki, steer_torque_limit)
     check_run(rate, dt, controller, sensors)  # before any work
     if given("seed") and not (current_noise > 0 or jitter > 0):
         raise InputError(f"--seed {seed}: seeds the current noise and timestamp jitter, and "

@@ -22,7 +22,7 @@ from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.units import FRICTION_VARIANTS
-from ropod_sysid.noise import counts_note, detect_encoder_counts
+from ropod_sysid.noise import counts_note, detect_encoder_counts, require_base_rows
 from ropod_sysid.params import (
     DISSIPATIVE_SIGN,
     UNITS_OF,
@@ -674,6 +674,8 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     model = PlatformModel(platform)
     names = model.parameter_names(options.friction)
     check_fixed(options.fix, names)  # before the logs are read
+    if options.encoder_counts:
+        require_base_rows(model, "--encoder-counts")
     delay = 0.0
     if options.input_delay == "auto":
         reduced, delay = _delay_search(reduce, names, options)

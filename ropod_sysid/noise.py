@@ -244,6 +244,18 @@ def error_gram(a_k: np.ndarray, cov: np.ndarray, groups: int | None = None) -> n
     return out[0] if groups is None else out
 
 
+def require_base_rows(model: object, what: str) -> None:
+    """The sensor-noise model covers platforms whose rows are the base's three: a one-line
+    :class:`InputError` naming ``what`` for one with units of their own coordinates."""
+    from ropod_sysid.errors import InputError
+
+    if getattr(model, "n_dof", 3) > 3:
+        platform = model.platform  # type: ignore[attr-defined]
+        raise InputError(f"{what}: the sensor-noise model does not cover units with coordinates "
+                         f"of their own yet ({platform.source} has "
+                         f"{', '.join(platform.types)} units); leave it out")
+
+
 def row_variances(model: object, st: object, params: object, noise: SensorNoise,
                   friction: str = "per-wheel") -> np.ndarray:
     """Variance (N, 3) [N², N², (N m)²] of each DOF of the equation rows at the states ``st``

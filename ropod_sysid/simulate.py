@@ -143,7 +143,10 @@ def check_run(rate: float, dt: float, controller: Controller, sensors: Sensors) 
     if not (int(sensors.seed) == sensors.seed and 0 <= sensors.seed <= MAX_SEED):
         raise InputError(f"--seed {sensors.seed}: must be a whole number in [0, {MAX_SEED}]")
     for name, value, low in (("--kp", controller.kp, 0.0), ("--ki", controller.ki, 0.0),
-                             ("--torque-limit", controller.torque_limit, None)):
+                             ("--torque-limit", controller.torque_limit, None),
+                             ("--steer-kp", controller.steer_kp, 0.0),
+                             ("--steer-ki", controller.steer_ki, 0.0),
+                             ("--steer-torque-limit", controller.steer_torque_limit, None)):
         if not (math.isfinite(value) and (value > 0 if low is None else value >= low)):
             raise InputError(f"{name} {value:g}: must be a finite number "
                              f"{'> 0' if low is None else '≥ 0'}")
@@ -266,10 +269,13 @@ def simulate(platform: Platform, params: DynamicParameters,
                 records, bar)
         else:
             kp, ki, limit = None, None, None
+            # planned angles of position-controlled joints (steering), on the step grid
+            plans = model.plans(grid[:, 0] - t0[0], np.swapaxes(sp_all, 0, 1))
             for step in range(steps + 1):
                 # controller (zero-order hold over the step): IK for the current unit angles
                 st = model.state(q, qd, angles)
-                want, angle_err = model.setpoints(q, sp_all[step], sp_rate[step], angles)
+                want, angle_err = model.setpoints(q, sp_all[step], sp_rate[step], angles, plans,
+                                                  step)
                 if kp is None:
                     kp, ki, limit = controller.gains(~np.isnan(angle_err[0]))
                 err = want - st.actuator_rate

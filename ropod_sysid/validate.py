@@ -116,7 +116,9 @@ def predicted_velocity(model: PlatformModel, params: DynamicParameters, t: np.nd
     pose and unit angles. ``state`` = (q, q̈, angles, angle rates, τ) at the times ``t``."""
     q, _, angles, rates, tau = state
     st = model.state(q, qd, angles, rates)
-    qdd = model.forward_dynamics(st, params, tau, friction=friction_of(params))
+    # the base's accelerations (with constraints: those they allow, the constraint forces
+    # solved for, eqs. 33 and 001 eqs. 11–15)
+    qdd = model.forward_dynamics(st, params, tau, friction=friction_of(params))[:, :3]
     steps = 0.5 * (qdd[1:] + qdd[:-1]) * np.diff(t)[:, None]
     integral = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
     seg = np.floor((t - t[0]) / window).astype(int)

@@ -54,16 +54,32 @@ def _gather(parts: list[tuple[np.ndarray, np.ndarray]], size: int, axis: int) ->
 
 
 RANK_TOLERANCE = 1e-9  # singular values of G below this × the largest count as zero
+# identification rows leave out the base rows where the constraints are this close to losing
+# rank (σ_min/σ_max of the base block of G, over the rank the platform has when regular)
+SINGULAR_MARGIN = 0.1
 
 
-def null_projector(g: np.ndarray, n_dof: int) -> np.ndarray:
+def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0) -> np.ndarray:
     """P = I − G⁺G (N, D, D), the orthogonal projector onto the null space of constraint rows
     G (N, C, D): by an SVD, singular values below :data:`RANK_TOLERANCE` × the largest
-    dropped (001 eqs. 11–15 with a rank tolerance instead of Algorithm 1's divisions)."""
+    dropped (001 eqs. 11–15 with a rank tolerance instead of Algorithm 1's divisions).
+
+    ``margin`` > 0 (identification): where the base block of G is near singular — its
+    smallest singular value of the regular rank below ``margin`` × its largest — the base rows
+    are removed altogether (P's base block zero). There the null direction turns with the
+    smallest error of the measured angles, and the constraint forces, large near a singular
+    configuration, would leak into the rows; the units' own rows are free of them and stay."""
     _, sv, vt = np.linalg.svd(g, full_matrices=False)  # vt (N, min(C, D), D)
     keep = sv > RANK_TOLERANCE * np.maximum(sv[:, :1], np.finfo(float).tiny)
     v = vt * keep[..., None]
-    return np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
+    proj = np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
+    if margin > 0:
+        base = np.linalg.svd(g[:, :, :3], compute_uv=False)  # (N, min(C, 3))
+        regular = int(np.max(np.sum(base > RANK_TOLERANCE * base[:, :1], axis=1)))
+        near = base[:, regular - 1] < margin * base[:, 0]
+        proj[near, :3, :] = 0.0
+        proj[near, :, :3] = 0.0
+    return proj
 
 
 def _rows(values: np.ndarray, idx: np.ndarray, size: int, axes: tuple[int, ...] = (1,)
@@ -237,20 +253,40 @@ class PlatformModel:
                  for g, u in self.groups]
         return _gather(parts, self.layout.n_currents, 1)
 
+    def plans(self, t: np.ndarray, twists: np.ndarray) -> list[tuple[np.ndarray, ...] | None]:
+        """Per group, the planned angles and rates of its position-controlled joints along
+        base-frame twists (R, N, 3) at times t (N,) — (angles (N, R, k), rates (N, R, k)) of
+        the steered wheels' steering (:meth:`predict_angles` of the type) — or None."""
+        out: list[tuple[np.ndarray, ...] | None] = []
+        for g, u in self.groups:
+            if not hasattr(u, "controller_setpoints"):
+                out.append(None)
+                continue
+            pred = u.predict_angles(t, twists)
+            own = list(getattr(g.type, "coordinates", ()))
+            a = pred.angles.reshape(*pred.angles.shape[:2], u.n_units, -1)[..., own[0]]
+            r = pred.rates.reshape(*pred.rates.shape[:2], u.n_units, -1)[..., own[0]]
+            out.append((np.swapaxes(a, 0, 1), np.swapaxes(r, 0, 1)))
+        return out
+
     def setpoints(self, q: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray,
-                  angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                  angles: np.ndarray, plans: list[tuple[np.ndarray, ...] | None] | None = None,
+                  step: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """The low-level controllers' setpoints for base-frame twists (N, 3) and their rates:
         actuator-rate setpoints (N, A), and the angle errors (N, A) of the position-controlled
-        actuators (the steered wheels' steering, 001 eq. 25), NaN where an actuator is
-        speed-controlled (its setpoint from the inverse kinematics, :meth:`actuator_rates`)."""
+        actuators (the steered wheels' steering, 001 eq. 25; at sample ``step`` of the
+        :meth:`plans` when given), NaN where an actuator is speed-controlled (its setpoint
+        from the inverse kinematics, :meth:`actuator_rates`)."""
         c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
         world = np.stack([c * twist[:, 0] - s * twist[:, 1], s * twist[:, 0] + c * twist[:, 1],
                           twist[:, 2]], axis=-1)
         rates, errors = [], []
-        for g, u in self.groups:
+        for i, (g, u) in enumerate(self.groups):
             ang = _take(angles, g.angles, 1)
             if hasattr(u, "controller_setpoints"):
-                r, e = u.controller_setpoints(twist, twist_rate, ang)
+                plan = None if plans is None or plans[i] is None else (
+                    plans[i][0][step], plans[i][1][step])  # type: ignore[index]
+                r, e = u.controller_setpoints(twist, twist_rate, ang, plan)
             else:
                 r, e = u.actuator_rates(q, world, ang), None
             rates.append((g.currents, r))
@@ -358,8 +394,10 @@ class PlatformModel:
         """F_b = B_Fb⁻¹ (M_dir q̈ − B_τ (τ + τ_f) − f_f − b_dir) (eq. 40); (N, 3)."""
         eom = self.direct_eom(st, params, friction)
         resid = np.einsum("ncd,nd->nc", eom.m_dir, qdd) - eom.generalized_force(tau)
-        proj = self.projector(st)
-        if proj is not None:  # the constraint forces Gᵀλ are not a disturbance
+        con = self.constraints(st)
+        if con is not None:  # the constraint forces Gᵀλ are not a disturbance; near a
+            # singular configuration they leak into the projection: none is estimated there
+            proj = null_projector(con[0], self.n_dof, SINGULAR_MARGIN)
             resid = np.einsum("nij,nj->ni", proj, resid)
         # B_Fb is a rotation about z (det = 1, eq. 3): its inverse is its transpose
         return np.einsum("ndc,nd->nc", eom.b_fb[:, :3], resid[:, :3])
@@ -421,10 +459,12 @@ class PlatformModel:
         return self._projected(st, out)
 
     def _projected(self, st: State, rows: np.ndarray) -> np.ndarray:
-        """P rows (N, D, …): the constraint forces removed (unchanged without constraints)."""
-        proj = self.projector(st)
-        if proj is None:
+        """P rows (N, D, …): the constraint forces removed (unchanged without constraints);
+        near-singular configurations leave out the base rows (:func:`null_projector`)."""
+        con = self.constraints(st)
+        if con is None:
             return rows
+        proj = null_projector(con[0], self.n_dof, SINGULAR_MARGIN)
         return np.einsum("nij,nj...->ni...", proj, rows)
 
     @staticmethod

@@ -21,7 +21,11 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.noise import SensorNoise
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.fourier import FourierFamily, _scaled_twist
-from ropod_sysid.trajectory.identifiability import _world_motion, conditioning
+from ropod_sysid.trajectory.identifiability import (
+    _world_motion,
+    conditioning,
+    with_own_coordinates,
+)
 from ropod_sysid.trajectory.limits import (
     DEFAULT_FLOOR,
     PIVOT_DESIGN_MARGIN,
@@ -99,6 +103,10 @@ class _Objective:
         self.rank: int | None = None
         self.evaluations = 0
         self.sigma = sigma
+        if sigma is not None:
+            from ropod_sysid.noise import require_base_rows
+
+            require_base_rows(self.model, "--objective sigma (use --objective cond)")
         self.rows_per_eval = (sigma.sensors.rows_per_second * step / grid_rate
                               if sigma is not None else 1.0)
         self.variances: np.ndarray | None = None  # mean row variances (3,), from the 1st batch
@@ -138,15 +146,16 @@ class _Objective:
                                   - 1.0, 0.0)
         idx = self.eval_idx
         q, qd, qdd = _world_motion(self.t, tw_v, twd_v)
-        n_s = coef.shape[0]
+        qd, qdd = with_own_coordinates(self.model, self.t, qd, qdd, pred.rates)
+        n_s, d = coef.shape[0], qd.shape[-1]
         # angle rates from the constraints (the swivel's eq. 8a) at the quasi-steady angles:
         # consistent kinematics, so the structural rank deficiency shows exactly
-        st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, 3),
+        st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, d),
                               pred.angles[:, :, idx].reshape(n_s * 4 * idx.size, -1))
-        a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, 3),
+        a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, d),
                                 self.friction)  # type: ignore[arg-type]
         if self.sigma is not None:
-            value = self._sigma_value(a.reshape(n_s, -1, 3, a.shape[-1]), st)
+            value = self._sigma_value(a.reshape(n_s, -1, d, a.shape[-1]), st)
             return value + 10.0 * penalty + 100.0 * penalty**2
         a = a.reshape(n_s, -1, a.shape[-1])
         norms = np.linalg.norm(a, axis=1)

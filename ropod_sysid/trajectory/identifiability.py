@@ -37,6 +37,18 @@ def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = N
     return q, qd, qdd
 
 
+def with_own_coordinates(model: object, t: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                         rates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The generalized velocity and acceleration (…, N, D) of planned motions: the base's
+    (…, N, 3) followed by the units' own coordinates' (the steered wheels' β̇ from the
+    predicted angle rates (…, N, J), β̈ by differences over t); unchanged without any."""
+    if model.n_dof == 3:  # type: ignore[attr-defined]
+        return qd, qdd
+    own = rates[..., model.coordinate_channels]  # type: ignore[attr-defined]
+    acc = np.gradient(own, t, axis=-2) if own.shape[-2] > 1 else np.zeros_like(own)
+    return np.concatenate([qd, own], axis=-1), np.concatenate([qdd, acc], axis=-1)
+
+
 def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                     angles: np.ndarray, friction: str, chunk: int = 20000,
                     noise: tuple[object, object] | None = None,
@@ -100,7 +112,7 @@ def predicted_std(a: np.ndarray, noise: float | tuple[float, float] = 1.0,
 
     Parameters
     ----------
-    a : (M, 3, p) regressor rows sampled at ``rows_per_second`` samples per second of run
+    a : (M, D, p) regressor rows sampled at ``rows_per_second`` samples per second of run
     noise : σ of b_ID, white: one value for every row, or (translation [N], rotation [N m])
     rows_per_second : the log samples each evaluated sample stands for: the information of a
         log at rate r_log evaluated at rate r_eval is r_log / r_eval times that of the rows
@@ -109,7 +121,7 @@ def predicted_std(a: np.ndarray, noise: float | tuple[float, float] = 1.0,
     combination with others (outside the identifiable subspace) get inf.
     """
     sig = (noise, noise) if isinstance(noise, int | float) else noise
-    w = np.array([1.0 / sig[0], 1.0 / sig[0], 1.0 / sig[1]])
+    w = np.where(np.arange(a.shape[1]) < 2, 1.0 / sig[0], 1.0 / sig[1])  # x, y; θ and own
     aw = (a * w[None, :, None]).reshape(-1, a.shape[-1]) * math.sqrt(rows_per_second)
     norms = np.linalg.norm(aw, axis=0)
     scale = np.where(norms > 0, norms, 1.0)

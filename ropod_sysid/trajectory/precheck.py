@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.noise import SensorNoise, predicted_fit_std
+from ropod_sysid.noise import SensorNoise, predicted_fit_std, require_base_rows
 from ropod_sysid.params import Parameters
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.identifiability import (
@@ -26,6 +26,7 @@ from ropod_sysid.trajectory.identifiability import (
     _world_motion,
     conditioning,
     predicted_std,
+    with_own_coordinates,
 )
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Floor, Limits, _check_floor
 from ropod_sysid.trajectory.prediction import Prediction, _variant_prediction
@@ -345,6 +346,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
         std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
     else:
+        require_base_rows(model, "the sensor model (--current-noise, --encoder-counts)")
         (a, var, gram), dt_eval = stacked_regressor(fine, twists, pred, model,  # type: ignore[misc]
                                                     friction, eval_rate, noise=(truth, sensors))
         std, bias, s_hat, _ = predicted_fit_std(a, var, true_values, sensors,
@@ -400,9 +402,10 @@ def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, mo
     step = max(int(round(1.0 / (eval_rate * dt))), 1)
     idx = np.arange(0, fine.n_samples, step)
     q, qd, qdd = _world_motion(fine.t, twists)
-    n_var = twists.shape[0]
-    a = _regressor_rows(model, q[:, idx].reshape(-1, 3), qd[:, idx].reshape(-1, 3),
-                        qdd[:, idx].reshape(-1, 3),
+    qd, qdd = with_own_coordinates(model, fine.t, qd, qdd, pred.rates)
+    n_var, d = twists.shape[0], qd.shape[-1]
+    a = _regressor_rows(model, q[:, idx].reshape(-1, 3), qd[:, idx].reshape(-1, d),
+                        qdd[:, idx].reshape(-1, d),
                         pred.angles[:, idx].reshape(n_var * idx.size, -1), friction,
                         noise=noise)
     return a, step * dt  # type: ignore[return-value]

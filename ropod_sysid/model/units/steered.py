@@ -79,6 +79,40 @@ from ropod_sysid.model.units.entry import check_keys, point, resolved, unit_name
 
 STEER, DRIVE = 0, 1  # a unit's angle channels: steering angle, then wheel angle
 HOLD_SPEED = 1e-3  # below this wheel-centre speed [m/s] a steering setpoint holds its angle
+PLAN_SPEED = 0.01  # below this wheel-centre speed [m/s] planned steering turns smoothly
+
+
+def planned_steering(t: np.ndarray, u_x: np.ndarray, u_y: np.ndarray,
+                     slow: float = PLAN_SPEED) -> np.ndarray:
+    """Steering angles (V, N, k) for wheel-centre velocities u (V, N, k) [m/s] at times t (N,):
+    along u where the wheel moves at least ``slow``, continuous modulo π; across each stretch
+    where it is slower, a smooth step (3s² − 2s³) from the angle before to the angle after
+    (the nearest of it modulo π); before the first motion the first moving angle, after the
+    last the last one (0 for a wheel that never moves). Loops over the slow stretches only."""
+    moving = np.hypot(u_x, u_y) >= slow
+    raw = np.arctan2(u_y, u_x)
+    out = np.zeros(raw.shape)
+    for v, j in zip(*np.nonzero(moving.any(axis=1)), strict=True):
+        m = moving[v, :, j]
+        idx = np.flatnonzero(m)
+        # continuous modulo π over the moving samples alone (slow ones carry no direction)
+        b_m = 0.5 * np.unwrap(2.0 * raw[v, idx, j])
+        col = np.interp(np.arange(m.size), idx, b_m)  # holds the ends
+        starts = np.flatnonzero(~m[1:] & m[:-1]) + 1  # first slow sample of a gap
+        for s0 in starts:
+            nxt = idx[idx > s0]
+            if nxt.size == 0:
+                break
+            i0, i1 = s0 - 1, nxt[0]
+            a0, a1 = col[i0], col[i1]
+            a1 = a1 - np.pi * np.round((a1 - a0) / np.pi)  # turn by at most 90°
+            shift = a1 - col[i1]
+            sl = slice(i0, i1 + 1)
+            x = (t[sl] - t[i0]) / (t[i1] - t[i0])
+            col[sl] = a0 + (a1 - a0) * x * x * (3 - 2 * x)
+            col[i1 + 1:] += shift  # keep the later angles continuous with the turn
+        out[v, :, j] = col
+    return out
 
 
 @dataclass(frozen=True)
@@ -216,8 +250,13 @@ class SteeredUnits:
         return self.k_t.copy()
 
     def initial_angles(self, twist: np.ndarray) -> np.ndarray:
-        """Steering angles along the first motion's wheel-centre velocities, wheel angles 0."""
-        beta = self.steering_angles(np.asarray(twist, float)[None])[0]
+        """Steering angles along the first motion's wheel-centre velocities (however slow;
+        0 for a wheel that does not move), wheel angles 0: the start of the planned steering
+        (:meth:`predict_angles`)."""
+        tw = np.asarray(twist, float)
+        u_x = tw[0] - tw[2] * self.positions[:, 1]
+        u_y = tw[1] + tw[2] * self.positions[:, 0]
+        beta = np.where(np.hypot(u_x, u_y) > 0, np.arctan2(u_y, u_x), 0.0)
         return np.stack([beta, np.zeros(self.n_units)], axis=-1).reshape(-1)
 
     @staticmethod
@@ -317,12 +356,22 @@ class SteeredUnits:
         return beta_d, beta_rate, np.where(moving, wheel, 0.0)
 
     def controller_setpoints(self, twist: np.ndarray, twist_rate: np.ndarray,
-                             angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                             angles: np.ndarray, plan: tuple[np.ndarray, np.ndarray] | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
         """Per actuator (N, 2k), drive then steering: the rate setpoints (φ̇_d, β̇_d) and the
         angle errors (NaN for the speed-controlled drive, β_d − β for the steering) of the
-        decentralised controllers (001 eqs. 24–25; :meth:`steering_setpoints`)."""
+        decentralised controllers (001 eqs. 24–25). ``plan`` = (β_d, β̇_d) (N, k) planned
+        steering (:meth:`predict_angles`), else :meth:`steering_setpoints` from the twist
+        alone (which jumps where a wheel restarts in a new direction)."""
         beta = unit_major(angles, 2)[..., STEER]
-        beta_d, beta_rate, wheel = self.steering_setpoints(twist, twist_rate, beta)
+        if plan is None:
+            beta_d, beta_rate, wheel = self.steering_setpoints(twist, twist_rate, beta)
+        else:
+            beta_d, beta_rate = plan
+            tw = np.asarray(twist, float)
+            u_x = tw[:, 0:1] - tw[:, 2:3] * self.positions[:, 1]
+            u_y = tw[:, 1:2] + tw[:, 2:3] * self.positions[:, 0]
+            wheel = (np.cos(beta_d) * u_x + np.sin(beta_d) * u_y) / self.r
         rates = np.stack([wheel, beta_rate], axis=-1).reshape(beta.shape[0], -1)
         errors = np.stack([np.full_like(beta, np.nan), beta_d - beta], axis=-1)
         return rates, errors.reshape(beta.shape[0], -1)
@@ -344,32 +393,26 @@ class SteeredUnits:
 
     def predict_angles(self, t: np.ndarray, twists: np.ndarray,
                        initial: np.ndarray | None = None) -> AnglePrediction:
-        """Unit angles along base-frame twists (…, N, 3): each wheel steered along its
-        wheel-centre velocity (continuous modulo π: the drive reverses rather than the unit
-        turning round), held where the wheel stops; wheel angles integrated from S1."""
+        """The planned unit angles along base-frame twists (…, N, 3): each wheel steered along
+        its wheel-centre velocity (continuous modulo π: the drive reverses rather than the
+        unit turning round); while a wheel is slower than :data:`PLAN_SPEED` the unit turns
+        from its last direction to its next one along a smooth step (zero rate at both ends),
+        so that the steering never jumps; wheel angles integrated from S1 at those angles.
+        The simulator's steering loops track these angles (:meth:`controller_setpoints`)."""
         tw, lead = series(twists)
         n_var, n, _ = tw.shape
         k = self.n_units
-        flat = tw.reshape(-1, 3)
-        beta = self.steering_angles(flat).reshape(n_var, n, k)
+        t = np.asarray(t, float)
         px, py = self.positions[:, 0], self.positions[:, 1]
-        speed = np.hypot(flat[:, 0:1] - flat[:, 2:3] * py,
-                         flat[:, 1:2] + flat[:, 2:3] * px).reshape(n_var, n, k)
-        moving = speed >= HOLD_SPEED
-        # hold the last moving angle (the first one before any motion)
-        idx = np.maximum.accumulate(np.where(moving, np.arange(n)[None, :, None], -1), axis=1)
-        idx = np.where(idx < 0, np.argmax(moving, axis=1)[:, None, :], idx)
-        beta = np.take_along_axis(beta, idx, axis=1)
-        beta = 0.5 * np.unwrap(2.0 * beta, axis=1)  # continuous modulo π
+        u_x = tw[..., 0:1] - tw[..., 2:3] * py  # (V, N, k) wheel-centre velocity, base frame
+        u_y = tw[..., 1:2] + tw[..., 2:3] * px
+        beta = planned_steering(t, u_x, u_y)
         if initial is not None:
             start = unit_major(np.broadcast_to(np.asarray(initial, float).reshape(-1, 2 * k),
                                                (n_var, 2 * k)), 2)
             beta = beta + np.pi * np.round((start[:, None, :, STEER] - beta[:, :1]) / np.pi)
-        t = np.asarray(t, float)
         beta_rate = np.gradient(beta, t, axis=1) if n > 1 else np.zeros_like(beta)
-        c, _ = self._heading_terms(beta)
-        cb, sb = np.cos(beta), np.sin(beta)
-        wheel = (cb * tw[..., 0:1] + sb * tw[..., 1:2] + c * tw[..., 2:3]) / self.r
+        wheel = (np.cos(beta) * u_x + np.sin(beta) * u_y) / self.r
         phi0 = np.zeros((n_var, k)) if initial is None else start[..., DRIVE]
         phi = integrated(t, wheel, phi0)
         angles = np.stack([beta, phi], axis=-1).reshape(n_var, n, 2 * k)
