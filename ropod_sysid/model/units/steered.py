@@ -253,9 +253,7 @@ class SteeredUnits:
         """Steering angles along the first motion's wheel-centre velocities (however slow;
         0 for a wheel that does not move), wheel angles 0: the start of the planned steering
         (:meth:`predict_angles`)."""
-        tw = np.asarray(twist, float)
-        u_x = tw[0] - tw[2] * self.positions[:, 1]
-        u_y = tw[1] + tw[2] * self.positions[:, 0]
+        u_x, u_y = self.centre_velocity(twist)
         beta = np.where(np.hypot(u_x, u_y) > 0, np.arctan2(u_y, u_x), 0.0)
         return np.stack([beta, np.zeros(self.n_units)], axis=-1).reshape(-1)
 
@@ -276,6 +274,14 @@ class SteeredUnits:
         cb, sb = np.cos(beta), np.sin(beta)
         px, py = self.positions[:, 0], self.positions[:, 1]
         return px * sb - py * cb, px * cb + py * sb
+
+    def centre_velocity(self, twists: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The wheel centres' velocity v + ω × p_i [m/s] in the base frame for base-frame
+        twists (…, 3) (or their rates: the centres' accelerations less the centripetal
+        term): (u_x, u_y), each (…, k)."""
+        tw = np.asarray(twists, float)
+        px, py = self.positions[:, 0], self.positions[:, 1]
+        return tw[..., 0:1] - tw[..., 2:3] * py, tw[..., 1:2] + tw[..., 2:3] * px
 
     def kinematics(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
                    angle_rates: np.ndarray | None = None,
@@ -317,19 +323,6 @@ class SteeredUnits:
                  - data.steer_rate * data.c * qd[:, 2:3])
         return g, g_dot
 
-    def steering_angles(self, twists: np.ndarray, hold: np.ndarray | None = None
-                        ) -> np.ndarray:
-        """Steering angles (N, k) along the wheel-centre velocities v + ω × p of base-frame
-        twists (N, 3); below :data:`HOLD_SPEED` the angle ``hold`` (N, k) (default 0)."""
-        tw = np.asarray(twists, float)
-        u_x = tw[:, 0:1] - tw[:, 2:3] * self.positions[:, 1]
-        u_y = tw[:, 1:2] + tw[:, 2:3] * self.positions[:, 0]
-        beta = np.arctan2(u_y, u_x)
-        slow = np.hypot(u_x, u_y) < HOLD_SPEED
-        if slow.any():
-            beta = np.where(slow, 0.0 if hold is None else hold, beta)
-        return beta
-
     def steering_setpoints(self, twist: np.ndarray, twist_rate: np.ndarray, beta: np.ndarray
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The decentralised controllers' setpoints (001 eqs. 24–25) for base-frame twists
@@ -337,13 +330,8 @@ class SteeredUnits:
         angle β_d nearest β that points the wheel along its velocity (the drive reverses
         rather than the unit turning by more than 90°), its rate β̇_d and the wheel rate φ̇_d
         (all (N, k)). Below :data:`HOLD_SPEED` the unit holds its angle."""
-        tw = np.asarray(twist, float)
-        dtw = np.asarray(twist_rate, float)
-        px, py = self.positions[:, 0], self.positions[:, 1]
-        u_x = tw[:, 0:1] - tw[:, 2:3] * py
-        u_y = tw[:, 1:2] + tw[:, 2:3] * px
-        du_x = dtw[:, 0:1] - dtw[:, 2:3] * py
-        du_y = dtw[:, 1:2] + dtw[:, 2:3] * px
+        u_x, u_y = self.centre_velocity(twist)
+        du_x, du_y = self.centre_velocity(twist_rate)
         speed2 = u_x**2 + u_y**2
         moving = speed2 > HOLD_SPEED**2
         raw = np.arctan2(u_y, u_x)
@@ -368,9 +356,7 @@ class SteeredUnits:
             beta_d, beta_rate, wheel = self.steering_setpoints(twist, twist_rate, beta)
         else:
             beta_d, beta_rate = plan
-            tw = np.asarray(twist, float)
-            u_x = tw[:, 0:1] - tw[:, 2:3] * self.positions[:, 1]
-            u_y = tw[:, 1:2] + tw[:, 2:3] * self.positions[:, 0]
+            u_x, u_y = self.centre_velocity(twist)
             wheel = (np.cos(beta_d) * u_x + np.sin(beta_d) * u_y) / self.r
         rates = np.stack([wheel, beta_rate], axis=-1).reshape(beta.shape[0], -1)
         errors = np.stack([np.full_like(beta, np.nan), beta_d - beta], axis=-1)
@@ -403,9 +389,7 @@ class SteeredUnits:
         n_var, n, _ = tw.shape
         k = self.n_units
         t = np.asarray(t, float)
-        px, py = self.positions[:, 0], self.positions[:, 1]
-        u_x = tw[..., 0:1] - tw[..., 2:3] * py  # (V, N, k) wheel-centre velocity, base frame
-        u_y = tw[..., 1:2] + tw[..., 2:3] * px
+        u_x, u_y = self.centre_velocity(tw)  # (V, N, k)
         beta = planned_steering(t, u_x, u_y)
         if initial is not None:
             start = unit_major(np.broadcast_to(np.asarray(initial, float).reshape(-1, 2 * k),
