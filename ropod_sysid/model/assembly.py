@@ -57,29 +57,62 @@ RANK_TOLERANCE = 1e-9  # singular values of G below this × the largest count as
 # identification rows leave out the base rows where the constraints are this close to losing
 # rank (σ_min/σ_max of the base block of G, over the rank the platform has when regular)
 SINGULAR_MARGIN = 0.1
+# Rigid wheels that roll without slipping sideways leave a moving base one degree of freedom at
+# least: their axles meet at the instantaneous centre, and their lateral rows (on the base
+# twist) have rank 2 at most. Three or more wheels whose measured or tracked angles miss that
+# by a little would, taken exactly, lock the base (rank 3); the real wheels slip by that
+# little instead. The constraints are therefore taken as their nearest rank-2 set (Eckart and
+# Young: the SVD truncated), the rest counted as slip.
+CONSISTENT_RANK = 2
+# where the measured angles miss a common instantaneous centre by more than this (the base
+# block's third singular value over its first, about the angle error in rad) the wheels slip
+# and the base rows are left out of identification
+SLIP_MARGIN = 0.01
 
 
-def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0) -> np.ndarray:
+def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float = 0.0
+                   ) -> np.ndarray:
     """P = I − G⁺G (N, D, D), the orthogonal projector onto the null space of constraint rows
     G (N, C, D): by an SVD, singular values below :data:`RANK_TOLERANCE` × the largest
-    dropped (001 eqs. 11–15 with a rank tolerance instead of Algorithm 1's divisions).
+    dropped (001 eqs. 11–15 with a rank tolerance instead of Algorithm 1's divisions), and G
+    taken at rank :data:`CONSISTENT_RANK` at most (:func:`consistent_constraints`).
 
     ``margin`` > 0 (identification): where the base block of G is near singular — its
     smallest singular value of the regular rank below ``margin`` × its largest — the base rows
     are removed altogether (P's base block zero). There the null direction turns with the
     smallest error of the measured angles, and the constraint forces, large near a singular
-    configuration, would leak into the rows; the units' own rows are free of them and stay."""
+    configuration, would leak into the rows; the units' own rows are free of them and stay.
+    ``slip`` > 0: so are they where G has more than :data:`CONSISTENT_RANK` rows and its next
+    singular value exceeds ``slip`` × its largest (the wheels' angles miss a common centre:
+    they slip, and the odometry with them)."""
     _, sv, vt = np.linalg.svd(g, full_matrices=False)  # vt (N, min(C, D), D)
     keep = sv > RANK_TOLERANCE * np.maximum(sv[:, :1], np.finfo(float).tiny)
+    keep[:, CONSISTENT_RANK:] = False
     v = vt * keep[..., None]
     proj = np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
-    if margin > 0:
+    if margin > 0 or slip > 0:
         base = np.linalg.svd(g[:, :, :3], compute_uv=False)  # (N, min(C, 3))
         regular = int(np.max(np.sum(base > RANK_TOLERANCE * base[:, :1], axis=1)))
+        regular = min(regular, CONSISTENT_RANK)
         near = base[:, regular - 1] < margin * base[:, 0]
+        if slip > 0 and base.shape[1] > CONSISTENT_RANK:
+            near |= base[:, CONSISTENT_RANK] > slip * base[:, 0]
         proj[near, :3, :] = 0.0
         proj[near, :, :3] = 0.0
     return proj
+
+
+def consistent_constraints(g: np.ndarray, c: np.ndarray, rank: int = CONSISTENT_RANK
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """The constraints G q̇ = 0 (G (N, C, D)) and their right-hand side c (N, C) projected onto
+    the ``rank`` leading left singular directions of G: the nearest set of that rank (unchanged
+    where G has no more rows)."""
+    if g.shape[1] <= rank:
+        return g, c
+    u, _, _ = np.linalg.svd(g, full_matrices=False)
+    ur = u[:, :, :rank]
+    keep = np.einsum("nci,nei->nce", ur, ur)  # (N, C, C) projector onto the leading rows
+    return np.einsum("nce,ned->ncd", keep, g), np.einsum("nce,ne->nc", keep, c)
 
 
 def _rows(values: np.ndarray, idx: np.ndarray, size: int, axes: tuple[int, ...] = (1,)
@@ -219,9 +252,12 @@ class PlatformModel:
         return State(q, qd, angles, units, tuple(g for g, _ in self.groups),
                      self.layout.n_angles, self.layout.n_currents, self.rows, self.n_dof)
 
-    def constraints(self, st: State) -> tuple[np.ndarray, np.ndarray] | None:
+    def constraints(self, st: State, exact: bool = False
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
         """The constraint rows G (N, C, D) the units do not eliminate (the steered wheels'
-        lateral no-slip) and Ġ q̇ (N, C); None without any."""
+        lateral no-slip) and Ġ q̇ (N, C), as their nearest consistent set
+        (:func:`consistent_constraints`; ``exact``: as the angles give them); None without
+        any."""
         if not self.constrained:
             return None
         parts = [unit.constraint_jacobian(data)
@@ -232,7 +268,8 @@ class PlatformModel:
         g = np.concatenate([_rows(p[0], r, self.n_dof, (2,)) for p, r in zip(parts, rows,
                                                                            strict=True)],
                            axis=1)
-        return g, np.concatenate([p[1] for p in parts], axis=1)
+        c = np.concatenate([p[1] for p in parts], axis=1)
+        return (g, c) if exact else consistent_constraints(g, c)
 
     def projector(self, st: State) -> np.ndarray | None:
         """P = I − G⁺G (N, D, D) onto the motions the constraints allow (None: unconstrained)."""
@@ -394,10 +431,9 @@ class PlatformModel:
         """F_b = B_Fb⁻¹ (M_dir q̈ − B_τ (τ + τ_f) − f_f − b_dir) (eq. 40); (N, 3)."""
         eom = self.direct_eom(st, params, friction)
         resid = np.einsum("ncd,nd->nc", eom.m_dir, qdd) - eom.generalized_force(tau)
-        con = self.constraints(st)
-        if con is not None:  # the constraint forces Gᵀλ are not a disturbance; near a
+        proj = self.identification_projector(st)
+        if proj is not None:  # the constraint forces Gᵀλ are not a disturbance; near a
             # singular configuration they leak into the projection: none is estimated there
-            proj = null_projector(con[0], self.n_dof, SINGULAR_MARGIN)
             resid = np.einsum("nij,nj->ni", proj, resid)
         # B_Fb is a rotation about z (det = 1, eq. 3): its inverse is its transpose
         return np.einsum("ndc,nd->nc", eom.b_fb[:, :3], resid[:, :3])
@@ -461,11 +497,17 @@ class PlatformModel:
     def _projected(self, st: State, rows: np.ndarray) -> np.ndarray:
         """P rows (N, D, …): the constraint forces removed (unchanged without constraints);
         near-singular configurations leave out the base rows (:func:`null_projector`)."""
-        con = self.constraints(st)
-        if con is None:
-            return rows
-        proj = null_projector(con[0], self.n_dof, SINGULAR_MARGIN)
-        return np.einsum("nij,nj...->ni...", proj, rows)
+        proj = self.identification_projector(st)
+        return rows if proj is None else np.einsum("nij,nj...->ni...", proj, rows)
+
+    def identification_projector(self, st: State) -> np.ndarray | None:
+        """P (N, D, D) for rows built from measured angles (None: unconstrained): the
+        constraint forces removed, and the base rows left out near singular configurations
+        and where the wheels slip (:func:`null_projector` with :data:`SINGULAR_MARGIN`,
+        :data:`SLIP_MARGIN`)."""
+        con = self.constraints(st, exact=True)
+        return None if con is None else null_projector(con[0], self.n_dof, SINGULAR_MARGIN,
+                                                       SLIP_MARGIN)
 
     @staticmethod
     def _shared_spots(spots: list[tuple[np.ndarray | slice, np.ndarray | slice]]

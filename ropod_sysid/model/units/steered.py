@@ -79,39 +79,78 @@ from ropod_sysid.model.units.entry import check_keys, point, resolved, unit_name
 
 STEER, DRIVE = 0, 1  # a unit's angle channels: steering angle, then wheel angle
 HOLD_SPEED = 1e-3  # below this wheel-centre speed [m/s] a steering setpoint holds its angle
-PLAN_SPEED = 0.01  # below this wheel-centre speed [m/s] planned steering turns smoothly
+PLAN_SPEED = 0.01  # below this base speed [m/s] (ω counted at 1 m) planned steering turns smoothly
+PLAN_LENGTH = 1.0  # [m]: the base speed of a twist is |(v_x, v_y, PLAN_LENGTH ω)|
 
 
-def planned_steering(t: np.ndarray, u_x: np.ndarray, u_y: np.ndarray,
+def _slerp(a: np.ndarray, b: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Unit vectors (M, 3) along the great circle from unit vector a (3,) to b (3,) at
+    fractions s (M,) of the way."""
+    om = float(np.arccos(np.clip(a @ b, -1.0, 1.0)))
+    if om < 1e-9:
+        return np.broadcast_to(a, (s.size, 3)).copy()
+    return (np.sin((1.0 - s) * om)[:, None] * a + np.sin(s * om)[:, None] * b) / np.sin(om)
+
+
+def planned_twist_direction(t: np.ndarray, twists: np.ndarray, slow: float = PLAN_SPEED
+                            ) -> np.ndarray:
+    """The direction (V, N, 3) of base-frame twists (V, N, 3) (ω scaled by
+    :data:`PLAN_LENGTH`), carried across the stretches where the base is slower than ``slow``:
+    there it turns along a great circle from the direction before to the one after (or its
+    opposite, whichever is nearer: the same wheel axes) by a smooth step 3s² − 2s³. Before the
+    first motion it turns from the first nonzero twist's direction; after the last it holds.
+    Every steering angle derived from one direction is consistent with one instantaneous
+    centre, so units planned from it never lock the base (with three or more wheels a unit
+    turned on its own would). Zero where the twists are zero throughout. Loops over the slow
+    stretches only."""
+    scaled = np.asarray(twists, float) * np.array([1.0, 1.0, PLAN_LENGTH])
+    norm = np.linalg.norm(scaled, axis=-1)
+    unit = scaled / np.where(norm > 0, norm, 1.0)[..., None]
+    out = np.zeros_like(unit)
+    for v in range(unit.shape[0]):
+        idx = np.flatnonzero(norm[v] >= slow)
+        nonzero = np.flatnonzero(norm[v] > 0)
+        if idx.size == 0:  # never fast: its own direction where it has one
+            idx = nonzero
+        if idx.size == 0:
+            continue
+        d = unit[v].copy()
+        first = nonzero[0] if nonzero[0] < idx[0] else idx[0]
+        d[:first] = d[first]
+        d[idx[-1] + 1:] = d[idx[-1]]
+        # stretches to carry across: (last sample with a direction, next moving sample)
+        gaps = np.flatnonzero(np.diff(idx) > 1)
+        bridges = [(int(idx[g]), int(idx[g + 1])) for g in gaps]
+        if first < idx[0]:
+            bridges.insert(0, (int(first), int(idx[0])))
+        for i0, i1 in bridges:
+            a, b = d[i0], d[i1]
+            if a @ b < 0:  # the opposite direction gives the same axles: turn less
+                b = -b
+            x = (t[i0:i1 + 1] - t[i0]) / (t[i1] - t[i0])
+            d[i0:i1 + 1] = _slerp(a, b, x * x * (3.0 - 2.0 * x))
+        out[v] = d
+    return out
+
+
+def planned_steering(t: np.ndarray, twists: np.ndarray, positions: np.ndarray,
                      slow: float = PLAN_SPEED) -> np.ndarray:
-    """Steering angles (V, N, k) for wheel-centre velocities u (V, N, k) [m/s] at times t (N,):
-    along u where the wheel moves at least ``slow``, continuous modulo π; across each stretch
-    where it is slower, a smooth step (3s² − 2s³) from the angle before to the angle after
-    (the nearest of it modulo π); before the first motion the first moving angle, after the
-    last the last one (0 for a wheel that never moves). Loops over the slow stretches only."""
-    moving = np.hypot(u_x, u_y) >= slow
+    """Steering angles (V, N, k) of units at ``positions`` (k, 2) [m] for base-frame twists
+    (V, N, 3) at times t (N,): along each wheel centre's velocity for the planned twist
+    direction (:func:`planned_twist_direction`), continuous modulo π (the drive reverses
+    rather than the unit turning round); where a wheel centre stands still (on the
+    instantaneous centre) the angle is interpolated from its neighbours; 0 for a platform
+    that never moves."""
+    d = planned_twist_direction(t, twists, slow)
+    u_x = d[..., 0:1] - d[..., 2:3] / PLAN_LENGTH * positions[:, 1]
+    u_y = d[..., 1:2] + d[..., 2:3] / PLAN_LENGTH * positions[:, 0]
+    speed = np.hypot(u_x, u_y)
     raw = np.arctan2(u_y, u_x)
     out = np.zeros(raw.shape)
-    for v, j in zip(*np.nonzero(moving.any(axis=1)), strict=True):
-        m = moving[v, :, j]
-        idx = np.flatnonzero(m)
-        # continuous modulo π over the moving samples alone (slow ones carry no direction)
-        b_m = 0.5 * np.unwrap(2.0 * raw[v, idx, j])
-        col = np.interp(np.arange(m.size), idx, b_m)  # holds the ends
-        starts = np.flatnonzero(~m[1:] & m[:-1]) + 1  # first slow sample of a gap
-        for s0 in starts:
-            nxt = idx[idx > s0]
-            if nxt.size == 0:
-                break
-            i0, i1 = s0 - 1, nxt[0]
-            a0, a1 = col[i0], col[i1]
-            a1 = a1 - np.pi * np.round((a1 - a0) / np.pi)  # turn by at most 90°
-            shift = a1 - col[i1]
-            sl = slice(i0, i1 + 1)
-            x = (t[sl] - t[i0]) / (t[i1] - t[i0])
-            col[sl] = a0 + (a1 - a0) * x * x * (3 - 2 * x)
-            col[i1 + 1:] += shift  # keep the later angles continuous with the turn
-        out[v, :, j] = col
+    for v, j in zip(*np.nonzero((speed > 1e-9).any(axis=1)), strict=True):
+        idx = np.flatnonzero(speed[v, :, j] > 1e-9)
+        b = 0.5 * np.unwrap(2.0 * raw[v, idx, j])
+        out[v, :, j] = np.interp(np.arange(raw.shape[1]), idx, b)
     return out
 
 
@@ -381,16 +420,18 @@ class SteeredUnits:
                        initial: np.ndarray | None = None) -> AnglePrediction:
         """The planned unit angles along base-frame twists (…, N, 3): each wheel steered along
         its wheel-centre velocity (continuous modulo π: the drive reverses rather than the
-        unit turning round); while a wheel is slower than :data:`PLAN_SPEED` the unit turns
-        from its last direction to its next one along a smooth step (zero rate at both ends),
-        so that the steering never jumps; wheel angles integrated from S1 at those angles.
+        unit turning round); while the base is slower than :data:`PLAN_SPEED` the twist's
+        direction turns from its last value to its next one along a smooth step (zero rate at
+        both ends), so that the steering never jumps and every unit's angle suits one
+        instantaneous centre (:func:`planned_steering`); wheel angles integrated from S1 at
+        those angles.
         The simulator's steering loops track these angles (:meth:`controller_setpoints`)."""
         tw, lead = series(twists)
         n_var, n, _ = tw.shape
         k = self.n_units
         t = np.asarray(t, float)
         u_x, u_y = self.centre_velocity(tw)  # (V, N, k)
-        beta = planned_steering(t, u_x, u_y)
+        beta = planned_steering(t, tw, self.positions)
         if initial is not None:
             start = unit_major(np.broadcast_to(np.asarray(initial, float).reshape(-1, 2 * k),
                                                (n_var, 2 * k)), 2)
