@@ -5,7 +5,11 @@ The verdict is a rule of thumb (thresholds in :class:`Criteria`): the fit needs 
 10 s of it — in every base degree of freedom (forward, sideways, turning; from wheel odometry, as
 the range between the 1st and 99th percentile of each base-frame velocity), and every pivot
 must turn through a good part of the circle (pivot friction and the hub inertia are seen only
-when the units swivel).
+when the units swivel). On platforms whose wheels constrain the base (steered wheels) the fit
+leaves out the base rows near singular configurations and where the wheels slip: the verdict
+asks that it keeps them for at least half of the moving time, and it does not ask for sideways
+motion where sideways translation is itself a singular configuration (two steered wheels whose
+axles then lie on one line).
 """
 
 from __future__ import annotations
@@ -35,7 +39,9 @@ class Criteria:
     min_moving : seconds of motion [s]; moving means base speed above ``moving_speed`` [m/s] or
     turn rate above ``moving_turn`` [rad/s]; min_vx, min_vy [m/s], min_omega [rad/s] : range of
     each base velocity; min_pivot_coverage : degrees of the circle each pivot visits;
-    gap_factor : a sample interval longer than this many median intervals is a gap.
+    gap_factor : a sample interval longer than this many median intervals is a gap;
+    min_base_rows : share of the moving time whose base rows the fit must keep (constrained
+    platforms).
     """
 
     min_moving: float = 10.0
@@ -46,6 +52,7 @@ class Criteria:
     min_omega: float = 0.3
     min_pivot_coverage: float = 90.0
     gap_factor: float = 2.0
+    min_base_rows: float = 0.5
 
 
 @dataclass
@@ -78,6 +85,8 @@ class Inspection:
     pivot_coverage: dict[str, float]                  # unit → degrees of the circle visited
     enough_to_fit: bool
     reasons: list[str] = field(default_factory=list)  # why not, when not
+    base_rows_used: float | None = None  # share of the moving time with base rows in the fit
+    sideways_singular: bool = False  # sideways translation is a singular configuration
     warnings: list[str] = field(default_factory=list)
     column_units: dict[str, str] = field(default_factory=dict)  # column → SI unit
 
@@ -105,7 +114,12 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     ranges = {k: (float(np.nanmin(v)) + 0.0, float(np.nanmax(v)) + 0.0)  # (no "-0")
               for k, v in log.columns().items()}
 
-    vel, moving_time = _base_velocity(log, platform, t, dt_med, c)
+    vel, moving, widths, used = _base_velocity(log, platform, t, dt_med, c)
+    moving_time = float(np.sum(widths[moving]))
+    model = PlatformModel(platform)
+    sideways = _sideways_singular(model)
+    base_used = (None if used is None or moving_time == 0
+                 else float(np.sum(widths[moving & used]) / moving_time))
     names = ("vx", "vy", "omega")
     vel_ranges = {k: ((float(np.percentile(vel[:, j], 1)), float(np.percentile(vel[:, j], 99)))
                       if vel.shape[0] else (0.0, 0.0)) for j, k in enumerate(names)}
@@ -120,12 +134,18 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     short = motion_shortfall(moving_time, "of motion", c)
     if short is not None:
         reasons.append(short)
-    for key, need, unit in (("vx", c.min_vx, "m/s"), ("vy", c.min_vy, "m/s"),
-                            ("omega", c.min_omega, "rad/s")):
+    spans = [("vx", c.min_vx, "m/s"), ("vy", c.min_vy, "m/s"), ("omega", c.min_omega, "rad/s")]
+    if sideways:
+        del spans[1]
+    for key, need, unit in spans:
         lo, hi = vel_ranges[key]
         if hi - lo < need:
             reasons.append(f"{key} spans only {hi - lo:.3g} {unit} (1st–99th percentile); "
                            f"drive it through at least {need:g} {unit}")
+    if base_used is not None and base_used < c.min_base_rows:
+        reasons.append(f"the fit keeps the base rows for only {100 * base_used:.0f} % of the "
+                       "moving time (near singular configurations or slipping wheels); drive "
+                       "so that the wheels' axles cross away from the line through them")
     low = [u for u, deg in coverage.items() if deg < c.min_pivot_coverage]
     if low:
         reasons.append(f"pivot{'s' if len(low) > 1 else ''} {', '.join(low)} turn through less "
@@ -153,7 +173,7 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         dropped_frames=dropped, notes=list(log.notes), ranges=ranges,
         velocity_ranges=vel_ranges, moving_time=moving_time, pivot_coverage=coverage,
         enough_to_fit=not reasons, reasons=reasons, warnings=notes_w,
-        column_units=_column_units(log),
+        column_units=_column_units(log), base_rows_used=base_used, sideways_singular=sideways,
     )
 
 
@@ -178,21 +198,39 @@ def motion_shortfall(seconds: float, what: str = "of motion",
 
 
 def _base_velocity(log: Log, platform: Platform, t: np.ndarray, dt_med: float,
-                   c: Criteria) -> tuple[np.ndarray, float]:
-    """Base-frame twist (N, 3) from the encoders (rates smoothed over ~50 ms), and the time
-    spent moving [s]."""
+                   c: Criteria) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Base-frame twist (N, 3) from the encoders (rates smoothed over ~50 ms), the samples
+    that move (N,), each sample's share of the time axis [s] (N,), and (constrained platforms,
+    else None) the samples whose base rows the fit keeps (N,)."""
     if t.size < 3:
-        return np.zeros((0, 3)), 0.0
+        return np.zeros((0, 3)), np.zeros(t.size, bool), np.zeros(t.size), None
     angles, _ = unwrap_angles(platform.layout.wrapped, log.angles)
     rates = np.gradient(angles, t, axis=0)
     w = max(1, int(round(0.05 / dt_med))) if dt_med > 0 else 1
     if w > 1:
         rates = uniform_filter1d(rates, w, axis=0, mode="nearest")
-    vel = base_twist(PlatformModel(platform), angles, rates)
+    model = PlatformModel(platform)
+    vel = base_twist(model, angles, rates)
     moving = (np.hypot(vel[:, 0], vel[:, 1]) > c.moving_speed) | \
         (np.abs(vel[:, 2]) > c.moving_turn)
-    widths = np.gradient(t)        # each sample's share of the time axis
-    return vel, float(np.sum(widths[moving]))
+    used = None
+    if model.constrained:
+        st = model.state(np.zeros((t.size, 3)), vel, angles, rates)
+        proj = model.identification_projector(st)
+        used = np.abs(proj[:, :3, :3]).max(axis=(1, 2)) > 0.5
+    return vel, moving, np.gradient(t), used
+
+
+def _sideways_singular(model: PlatformModel) -> bool:
+    """Whether pure sideways translation puts the platform in a singular configuration (its
+    base rows left out of the fit)."""
+    if not model.constrained:
+        return False
+    twist = np.array([0.0, 1.0, 0.0])
+    angles = model.initial_angles(twist)[None]
+    st = model.state(np.zeros((1, 3)), twist[None], angles, np.zeros_like(angles))
+    proj = model.identification_projector(st)
+    return bool(np.abs(proj[0, :3, :3]).max() < 0.5)
 
 
 def inspect_file(path: str | Path, platform: Platform,
@@ -223,9 +261,14 @@ def format_inspection(ins: Inspection) -> str:
         "velocity   " + ", ".join(f"{k} [{lo:.3g}, {hi:.3g}]"
                                   for k, (lo, hi) in ins.velocity_ranges.items())
         + "  (1st–99th percentile, base frame; m/s, m/s, rad/s)",
-        *(["pivots     " + ", ".join(f"{u}: {deg:.0f}°"
+        *(["turning    " + ", ".join(f"{u}: {deg:.0f}°"
                                      for u, deg in ins.pivot_coverage.items())
-           + "  of the circle visited"] if ins.pivot_coverage else []),
+           + "  of the circle visited (pivots, steering)"] if ins.pivot_coverage else []),
+        *([f"base rows  kept by the fit for {100 * ins.base_rows_used:.0f} % of the moving "
+           "time (the rest near singular configurations or slipping)"]
+          if ins.base_rows_used is not None else []),
+        *(["sideways   a singular configuration of this platform (its axles then on one "
+           "line): not asked for"] if ins.sideways_singular else []),
         "ranges",
     ]
     width = max((len(k) for k in ins.ranges), default=0)

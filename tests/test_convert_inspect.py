@@ -201,3 +201,32 @@ def test_convert_writes_gzip_compressed_csv(files):
     one_line_error(run("convert", d / "run.csv", d / "x.txt", "--platform", pf),
                    "unknown log format '.txt'")
     assert not (d / "sw.csv.gz").exists() and not (d / "x.txt").exists()
+
+
+STEERED = Path(__file__).resolve().parents[1] / "datasets" / "steered"
+
+
+def test_steered_sample_converts_and_inspects(tmp_path):
+    """The shipped steered sample: CSV → JSON MCAP → CSV gives the same table; the ROS 2 layout
+    (swivel units only) is refused in one line; inspect counts the base rows the fit keeps and
+    does not ask the two-wheel base for sideways motion, a singular configuration of it."""
+    platform = str(STEERED / "platform.yaml")
+    src = STEERED / "original.csv.gz"
+    ok(run("convert", "--platform", platform, str(src), str(tmp_path / "o.mcap")))
+    ok(run("convert", "--platform", platform, str(tmp_path / "o.mcap"), str(tmp_path / "o.csv")))
+    a, b = (read_log(p, load_platform(platform)) for p in (src, tmp_path / "o.csv"))
+    assert np.array_equal(a.angles, b.angles) and np.array_equal(a.currents, b.currents)
+    one_line_error(run("convert", "--platform", platform, "--encoding", "ros2", str(src),
+                       str(tmp_path / "r.mcap")),
+                   f"error: {src}: the ROS 2 layout of ropod-sysid carries smart-wheel (swivel) "
+                   "units only; write JSON MCAP or CSV for this platform")
+    assert not (tmp_path / "r.mcap").exists()
+    ins = inspect_file(src, load_platform(platform))
+    assert ins.sideways_singular and ins.enough_to_fit, ins.reasons
+    assert 0.9 < ins.base_rows_used <= 1.0
+    text = format_inspection(ins)
+    assert "sideways   a singular configuration of this platform" in text
+    # the ropod's swivels do not constrain the base: nothing of the kind
+    ropod = inspect_file(SAMPLE.parent / "ropod" / "original.csv.gz",
+                         load_platform(SAMPLE.parent / "ropod" / "platform.yaml"))
+    assert ropod.base_rows_used is None and not ropod.sideways_singular

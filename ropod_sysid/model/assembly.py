@@ -92,8 +92,7 @@ def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float =
     proj = np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
     if margin > 0 or slip > 0:
         base = np.linalg.svd(g[:, :, :3], compute_uv=False)  # (N, min(C, 3))
-        regular = int(np.max(np.sum(base > RANK_TOLERANCE * base[:, :1], axis=1)))
-        regular = min(regular, CONSISTENT_RANK)
+        regular = min(base.shape[1], CONSISTENT_RANK)  # the rank away from singularities
         near = base[:, regular - 1] < margin * base[:, 0]
         if slip > 0 and base.shape[1] > CONSISTENT_RANK:
             near |= base[:, CONSISTENT_RANK] > slip * base[:, 0]
