@@ -68,6 +68,12 @@ CONSISTENT_RANK = 2
 # block's third singular value over its first, about the angle error in rad) the wheels slip
 # and the base rows are left out of identification
 SLIP_MARGIN = 0.01
+# the simulator's constraint forces leave out directions in which G's singular values are below
+# this × its largest (S = G M⁻¹ Gᵀ below its square): near a singular configuration the
+# steering loops' small errors make the exact constraints inconsistent, and the forces that
+# would enforce them grow as 1/σ² (the wheels scrub instead); 1e-10 made runs without
+# steering friction diverge
+SLIP_RANK = 1e-3
 
 
 def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float = 0.0
@@ -377,7 +383,8 @@ class PlatformModel:
         With constraints G q̇ = 0 the accelerations also satisfy G q̈ = −Ġ q̇ − ``stabilize`` G q̇
         (Baumgarte's term [1/s] against drift): Udwadia and Kalaba's
         q̈ = a + M⁻¹Gᵀ (G M⁻¹ Gᵀ)⁺ (c − G a), a = M⁻¹ Q, whose pseudo-inverse keeps
-        configurations where G loses rank regular.
+        configurations where G loses rank regular (directions below :data:`SLIP_RANK` are
+        left free: slip).
         """
         eom = self.direct_eom(st, params, friction)
         rhs = eom.generalized_force(tau, f_b)
@@ -390,7 +397,7 @@ class PlatformModel:
         c = -g_dot_qd - stabilize * np.einsum("ncd,nd->nc", g, qd)
         m_inv_gt = np.linalg.solve(eom.m_dir, np.swapaxes(g, 1, 2))  # (N, D, C)
         s_mat = np.einsum("ncd,nde->nce", g, m_inv_gt)
-        lam = np.einsum("nce,ne->nc", np.linalg.pinv(s_mat, rcond=1e-10),
+        lam = np.einsum("nce,ne->nc", np.linalg.pinv(s_mat, rcond=SLIP_RANK**2),
                         c - np.einsum("ncd,nd->nc", g, acc))
         return acc + np.einsum("ndc,nc->nd", m_inv_gt, lam)
 

@@ -97,7 +97,7 @@ def planned_twist_direction(t: np.ndarray, twists: np.ndarray, slow: float = PLA
     """The direction (V, N, 3) of base-frame twists (V, N, 3) (ω scaled by
     :data:`PLAN_LENGTH`), carried across the stretches where the base is slower than ``slow``:
     there it turns along a great circle from the direction before to the one after (or its
-    opposite, whichever is nearer: the same wheel axes) by a smooth step 3s² − 2s³. Before the
+    opposite, whichever is nearer: the same wheel axes) by a minimum-jerk step. Before the
     first motion it turns from the first nonzero twist's direction; after the last it holds.
     Every steering angle derived from one direction is consistent with one instantaneous
     centre, so units planned from it never lock the base (with three or more wheels a unit
@@ -128,7 +128,8 @@ def planned_twist_direction(t: np.ndarray, twists: np.ndarray, slow: float = PLA
             if a @ b < 0:  # the opposite direction gives the same axles: turn less
                 b = -b
             x = (t[i0:i1 + 1] - t[i0]) / (t[i1] - t[i0])
-            d[i0:i1 + 1] = _slerp(a, b, x * x * (3.0 - 2.0 * x))
+            # minimum-jerk step 10x³ − 15x⁴ + 6x⁵: rate and acceleration zero at both ends
+            d[i0:i1 + 1] = _slerp(a, b, x**3 * (10.0 - 15.0 * x + 6.0 * x * x))
         out[v] = d
     return out
 
@@ -421,10 +422,10 @@ class SteeredUnits:
         """The planned unit angles along base-frame twists (…, N, 3): each wheel steered along
         its wheel-centre velocity (continuous modulo π: the drive reverses rather than the
         unit turning round); while the base is slower than :data:`PLAN_SPEED` the twist's
-        direction turns from its last value to its next one along a smooth step (zero rate at
-        both ends), so that the steering never jumps and every unit's angle suits one
-        instantaneous centre (:func:`planned_steering`); wheel angles integrated from S1 at
-        those angles.
+        direction turns from its last value to its next one along a minimum-jerk step (zero
+        rate and acceleration at both ends), so that the steering never jumps and every
+        unit's angle suits one instantaneous centre (:func:`planned_steering`); wheel angles
+        integrated from S1 at those angles.
         The simulator's steering loops track these angles (:meth:`controller_setpoints`)."""
         tw, lead = series(twists)
         n_var, n, _ = tw.shape
