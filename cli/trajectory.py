@@ -86,9 +86,9 @@ def _singular_note(traj: Any, platform: Platform | None) -> str | None:
     rep = run_singular_report(traj, platform)
     if rep is None:
         return None
-    return (f"near singular (σ_{rep.rank}/σ_1 of the constraint rows < {rep.margin:g}, the fit "
-            f"leaves out the base rows there): {100 * rep.moving_fraction.max():.1f} % of the "
-            f"moving time, longest {rep.longest.max():.2f} s (trajectory check)")
+    return (f"near singular configurations (the fit leaves out the base rows): "
+            f"{100 * rep.moving_fraction.max():.1f} % of the moving time, longest "
+            f"{rep.longest.max():.2f} s (see trajectory check)")
 
 
 def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]:

@@ -52,6 +52,7 @@ class _Design:
     w_spin: float  # rotation rate in place [rad/s]
     pause: float  # rest in a stop-and-go [s]
     spin: bool = True  # long runs start with a rotation in place
+    spin_offset: float = 0.0  # … about a point this far to the right of the base origin [m]
     side: tuple[float, float] = (0.0, 1.0)  # crab lobes' short sides: direction (base frame)
 
 
@@ -195,10 +196,13 @@ def _fit_lobe(kind: str, design: _Design, caps: Limits, pivots: np.ndarray | Non
 def _start_spin(plan: _Plan, design: _Design) -> None:
     """Start: a whole clockwise rotation in place from rest (units set tangentially, as they
     trail a rotation), then away along +x through a tight right arc, at cruise speed; heading
-    back to 0 (mod 2π). Clockwise, so that the original run turns both ways early on."""
-    rot = np.array([0.0, 0.0, -design.w_spin])
-    arc = np.array([design.v_spin, 0.0, -design.w_spin])
-    slow = np.array([design.v_spin, 0.0, 0.0])
+    back to 0 (mod 2π). Clockwise, so that the original run turns both ways early on. With a
+    ``spin_offset`` d the rotation is about the point (0, −d) of the base frame instead (the
+    base origin on a circle of radius d) and the arc no tighter than that."""
+    w, d = design.w_spin, design.spin_offset
+    rot = np.array([w * d, 0.0, -w])
+    arc = np.array([max(design.v_spin, w * d), 0.0, -w])
+    slow = np.array([arc[0], 0.0, 0.0])
     t_rot = plan.blend_time(np.zeros(3), rot)
     t_arc = plan.blend_time(rot, arc)
     t_slow = plan.blend_time(arc, slow)
@@ -315,11 +319,14 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     resumes along the line it stopped on, so no turn on the spot is planned. Where the
     platform's constraint rows would come near losing rank (σ_r/σ_1 of their base block below
     :data:`~ropod_sysid.model.assembly.SINGULAR_MARGIN`, where the fit leaves out the base
-    rows), a manoeuvre is changed: no rotation in place at the start if one is near singular,
-    and the crab lobes' short sides turned from sideways (90°) towards the base x axis (75°,
-    60°, 45°) until that translation is clear of it. For seed 001's two wheels on the x axis
-    both are singular (all axles on one line); four wheels at the corners of a rectangle are
-    never near it. ``check`` reports the time that remains.
+    rows), a manoeuvre is changed (:func:`_regular_manoeuvres`): the start's rotation in place
+    becomes a rotation about a point beside the base origin (:data:`SPIN_OFFSETS` × the
+    largest unit distance, the first clear by twice the margin in all four variants), and the
+    crab lobes' short sides turn from sideways (90°) towards the base x axis
+    (:data:`SIDE_DIRECTIONS`) until that translation is clear of the margin. For seed 001's
+    two wheels on the x axis both are singular as planned for the ropod (all axles on one
+    line); four wheels at the corners of a rectangle are never near it. ``check`` reports the
+    time that remains.
 
     Parameters
     ----------
@@ -358,7 +365,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         platform = ropod_platform()
     pivots = trailing_points(platform) if pivot_rate_max is not None else None
     steering = steering_points(platform) if steer_rate_max is not None else None
-    spin, side = _regular_manoeuvres(platform)
+    spin_offset, side = _regular_manoeuvres(platform)
     rng = np.random.default_rng(seed)
     jitter = 1.0 if seed == 0 else float(rng.uniform(0.9, 1.1))
     order = list(LOBES)
@@ -383,7 +390,8 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         design = _Design(
             v=v, v_corner=v_corner, v_spin=0.2 * vm * speed,
             w_corner=min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner),
-            w_spin=0.9 * caps.w_max, pause=1.0, spin=spin, side=side)
+            w_spin=0.9 * caps.w_max, pause=1.0, spin=spin_offset is not None,
+            spin_offset=spin_offset or 0.0, side=side)
         try:
             segs = _typical_program(duration, caps, floor, pivots, design, order, shrink,
                                     steering)
@@ -428,25 +436,39 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
 
 
 SIDE_DIRECTIONS = (90.0, 75.0, 60.0, 45.0)  # typical(): crab sides tried [°], the first clear
+# typical(): centres of the start's rotation tried, to the right of the base origin, in units of
+# the largest distance of a unit from it (0: in place), the first clear of twice the margin
+SPIN_OFFSETS = (0.0, 0.25, 0.5, 1.0)
 
 
-def _regular_manoeuvres(platform: Platform) -> tuple[bool, tuple[float, float]]:
-    """(rotation in place at the start?, crab side direction (cos, sin)) for a platform: a
-    rotation in place only if it is clear of the singular margin, the first side direction of
-    :data:`SIDE_DIRECTIONS` whose translation is (90°, exactly (0, 1), if none is or without
-    constraints)."""
+def _regular_manoeuvres(platform: Platform) -> tuple[float | None, tuple[float, float]]:
+    """(offset [m] of the start's rotation centre, None: no rotation at the start; crab side
+    direction (cos, sin)) for a platform: the first of :data:`SPIN_OFFSETS` whose rotation
+    (0 for a platform without constraint rows) and the first direction of
+    :data:`SIDE_DIRECTIONS` whose translation stay clear of the singular margin in all four
+    variants (90°, exactly (0, 1), if none does)."""
     from ropod_sysid.model import PlatformModel
+    from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS
 
     model = PlatformModel(platform)
     if not model.constrained:
-        return True, (0.0, 1.0)
+        return 0.0, (0.0, 1.0)
+    signs = np.array(list(VARIANT_SIGNS.values()))  # (4, 3)
+    r_max = float(np.linalg.norm(platform.positions, axis=1).max())
+    offsets = r_max * np.array(SPIN_OFFSETS)
+    spins = np.stack([offsets, np.zeros(offsets.size), -np.ones(offsets.size)], axis=-1)
     sides = np.radians(SIDE_DIRECTIONS)
     dirs = np.stack([np.cos(sides), np.sin(sides)], axis=-1)
     dirs[sides == math.pi / 2] = (0.0, 1.0)
-    twists = np.vstack([[0.0, 0.0, 1.0], np.column_stack([dirs, np.zeros(sides.size)])])
-    clear = _singular_ratio_at(model, twists) >= SINGULAR_MARGIN
-    k = int(np.argmax(clear[1:])) if clear[1:].any() else 0
-    return bool(clear[0]), (float(dirs[k, 0]), float(dirs[k, 1]))
+    crabs = np.column_stack([dirs, np.zeros(sides.size)])
+    twists = np.vstack([spins, crabs])
+    ratio = _singular_ratio_at(model, (twists[None] * signs[:, None]).reshape(-1, 3))
+    worst = ratio.reshape(4, -1).min(axis=0)
+    spin_ok = worst[:offsets.size] >= 2 * SINGULAR_MARGIN
+    side_ok = worst[offsets.size:] >= SINGULAR_MARGIN
+    offset = float(offsets[int(np.argmax(spin_ok))]) if spin_ok.any() else None
+    k = int(np.argmax(side_ok)) if side_ok.any() else 0
+    return offset, (float(dirs[k, 0]), float(dirs[k, 1]))
 
 
 def _singular_ratio_at(model: object, twists: np.ndarray) -> np.ndarray:
