@@ -24,6 +24,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.trajectory import MAX_HARMONICS, OPTIMIZE_DURATION, TYPICAL_MAX_DURATION
 from ropod_sysid.trajectory.excitation import OBJECTIVES
+from ropod_sysid.trajectory.limits import STEER_RATE_MAX
 
 OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
              "negated": "negated.csv", "mirrored_negated": "mirrored_negated.csv"}
@@ -31,7 +32,7 @@ OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
 
 def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
     """--v-max, --a-max, --w-max, --alpha-max, --pivot-rate-max/--no-pivot-limit,
-    --wheel-rate-max, --floor."""
+    --steer-rate-max, --wheel-rate-max, --floor."""
     options = [
         click.option("--v-max", default=1.0, show_default=True, type=positive(),
                      help="Speed limit |v| [m/s]."),
@@ -46,9 +47,13 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
                           "wheel flips out)."),
         click.option("--no-pivot-limit", is_flag=True,
                      help="Do not limit the pivot rates."),
+        click.option("--steer-rate-max", default=STEER_RATE_MAX, show_default=True,
+                     type=positive("rad/s"),
+                     help="Steering rate limit |β̇| [rad/s] of units with an actuated steering "
+                          "(steered; default 195.95 °/s, seed 001's vehicle)."),
         click.option("--wheel-rate-max", default=None, type=positive("rad/s"),
-                     help="Rate limit |φ̇| of every driven wheel [rad/s] (any unit type) "
-                          "[default: none]."),
+                     help="Rate limit |φ̇| of every driven wheel [rad/s] (any unit type; not "
+                          "the steering motors) [default: none]."),
         click.option("--floor", nargs=4, type=float, default=None,
                      metavar="XMIN XMAX YMIN YMAX",
                      help="Floor rectangle for the base origin [m], start at (0, 0) "
@@ -60,14 +65,30 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
-            pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None) -> Any:
+            pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
+            steer_rate_max: float = STEER_RATE_MAX) -> Any:
     from ropod_sysid.trajectory import Limits
 
     if no_pivot_limit and given("pivot_rate_max"):
         raise InputError(f"--pivot-rate-max {pivot_rate_max:g} and --no-pivot-limit: give one "
                          "of them")
     return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max,
-                  wheel_rate_max)
+                  wheel_rate_max, steer_rate_max)
+
+
+def _singular_note(traj: Any, platform: Platform | None) -> str | None:
+    """One line on the time the run spends near singular configurations (platforms with
+    constraint rows), else None."""
+    if platform is None:
+        return None
+    from ropod_sysid.trajectory import run_singular_report
+
+    rep = run_singular_report(traj, platform)
+    if rep is None:
+        return None
+    return (f"near singular configurations (the fit leaves out the base rows): "
+            f"{100 * rep.moving_fraction.max():.1f} % of the moving time, longest "
+            f"{rep.longest.max():.2f} s (see trajectory check)")
 
 
 def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]:
@@ -176,21 +197,26 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
 @writes(inputs={"platform_path": "--platform"}, folders={"out": "--out"},
         folder_files=OUT_FILES.values())
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
-                    pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
-                    floor: tuple[float, ...], duration: float, platform_path: str | None,
-                    seed: int, dt: float, out: str, quiet: bool) -> None:
+                    pivot_rate_max: float, no_pivot_limit: bool, steer_rate_max: float,
+                    wheel_rate_max: float | None, floor: tuple[float, ...], duration: float,
+                    platform_path: str | None, seed: int, dt: float, out: str,
+                    quiet: bool) -> None:
     """Write a typical run and its three variants (mirrored, negated, mirrored-negated)."""
     from ropod_sysid.trajectory import typical
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
-                     wheel_rate_max)
+                     wheel_rate_max, steer_rate_max)
+    platform = _platform(platform_path)
     traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
-                   _floor(floor), dt, seed, limits.pivot_rate_max, _platform(platform_path),
-                   limits.wheel_rate_max)
+                   _floor(floor), dt, seed, limits.pivot_rate_max, platform,
+                   limits.wheel_rate_max, limits.steer_rate_max)
     written = _write_variants(traj, out)
     if not quiet:
         click.echo(f"typical run: {traj.duration:g} s, {traj.n_samples} setpoints; wrote "
                    + ", ".join(str(p) for p in written))
+        note = _singular_note(traj, platform)
+        if note:
+            click.echo(note)
 
 
 @command.command("optimize", short_help="An optimised run (Fourier series, min. condition).")
@@ -227,7 +253,8 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @writes(inputs={"platform_path": "--platform", "params_path": "--params"},
         folders={"out": "--out"}, folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
-                     pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
+                     pivot_rate_max: float, no_pivot_limit: bool, steer_rate_max: float,
+                     wheel_rate_max: float | None,
                      floor: tuple[float, ...], platform_path: str, duration: float,
                      harmonics: int, objective: str, target: str, current_noise: float | None,
                      encoder_counts: int | None, exact_encoders: bool, log_rate: float,
@@ -238,7 +265,7 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
     from ropod_sysid.trajectory import optimize
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
-                     wheel_rate_max)
+                     wheel_rate_max, steer_rate_max)
     platform = load_platform(platform_path)
     sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=True)
     params = _params(params_path, platform)
@@ -259,11 +286,14 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                                    for n, r in result.targets.items()))
         for note in result.notes:
             click.echo(f"note: {note}")
+        singular = _singular_note(result.trajectory, platform)
+        if singular:
+            click.echo(singular)
         click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
-@command.command("check", short_help="Limits, floor, pivot and wheel rates, predicted "
-                                     "accuracy.")
+@command.command("check", short_help="Limits, floor, pivot, steering and wheel rates, "
+                                     "singular time, predicted accuracy.")
 @click.argument("traj_path", metavar="TRAJ.csv", type=INPUT)
 @click.option("--platform", "platform_path", required=True, type=INPUT,
               help="Platform YAML (geometry).")
@@ -288,18 +318,21 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                 "params_path": "--params"})
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
-                  wheel_rate_max: float | None, floor: tuple[float, ...], noise: float,
+                  steer_rate_max: float, wheel_rate_max: float | None,
+                  floor: tuple[float, ...], noise: float,
                   current_noise: float | None, encoder_counts: int | None,
                   exact_encoders: bool, log_rate: float, friction: str,
                   params_path: str | None, plot_path: str | None, as_json: bool) -> None:
     """Check a setpoint CSV before a run: limits broken and where, pivot rates and wheel flips
-    (units with a pivot), wheel rates (every driven wheel), the predicted condition number and
-    rank of the four variants' stacked regressor, and the predicted standard deviation of every
-    parameter. Findings are reported, not errors (exit 0)."""
+    (units with a pivot), steering rates (steered units), wheel rates (every driven wheel), the
+    time near singular configurations (platforms with constraint rows: the fit leaves out the
+    base rows there), the predicted condition number and rank of the four variants' stacked
+    regressor, and the predicted standard deviation of every parameter. Findings are reported,
+    not errors (exit 0)."""
     from ropod_sysid.trajectory import check, plot, read_trajectory_csv
 
     limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
-                     wheel_rate_max)
+                     wheel_rate_max, steer_rate_max)
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
     platform = load_platform(platform_path)

@@ -266,3 +266,156 @@ def test_cli_optimize_and_check_a_mixed_platform(tmp_path, mixed):
     assert res.exit_code == 0, res.output
     assert "rank 22" in res.output and "\nfpc_3 " in res.output and "\nfoc_4 " in res.output
     assert "max predicted pivot rate per unit" in res.output
+
+
+# --------------------------------------------------------------------------- steered wheels
+
+STEERED = ROOT / "datasets" / "steered" / "platform.yaml"
+# four steered wheels at the corners of a 0.6 m × 0.4 m rectangle (built like seed 001's units)
+FOUR_STEERED = {"name": "four-steered", "wheel_radius": 0.1, "torque_constant": 2.0,
+                "steer_torque_constant": 10.0, "friction_tanh_gain": 100.0,
+                "units": [{"name": str(k + 1), "type": "steered", "position": p}
+                          for k, p in enumerate([[0.3, 0.2], [-0.3, 0.2], [-0.3, -0.2],
+                                                 [0.3, -0.2]])]}
+BASE = {"m_b": 93.0, "Jzz_b": 4.51}
+
+
+@pytest.fixture(scope="module")
+def two_steered():
+    return load_platform(STEERED)
+
+
+@pytest.fixture(scope="module")
+def four_steered():
+    from ropod_sysid.platform import platform_from_dict
+
+    return platform_from_dict(FOUR_STEERED, "<four>")
+
+
+def steering_peaks(traj: Trajectory, pf) -> np.ndarray:
+    """Predicted max |β̇| per variant (4,) [rad/s]."""
+    pred = predict_angles(traj.t, np.stack([v.twist() for v in variants(traj).values()]), pf)
+    assert pred.steering_units.all() and not pred.turning_units.any()
+    return np.abs(pred.steering).max(axis=(1, 2))
+
+
+@pytest.mark.parametrize("kind", ["two", "four"])
+def test_typical_keeps_the_steering_rate_limit(kind, two_steered, four_steered):
+    """The planned steering of all four variants stays within the limit, the default
+    (195.95 °/s) and a tighter one that the run planned without it breaks; the variants are
+    mirror images (equal peaks) and within the other limits."""
+    pf = two_steered if kind == "two" else four_steered
+    traj = typical(duration=30.0, platform=pf)
+    peaks = steering_peaks(traj, pf)
+    assert 1.5 < peaks.max() <= 3.42 and np.ptp(peaks) < 1e-9
+    free = steering_peaks(typical(duration=30.0, platform=pf, steer_rate_max=None), pf)
+    slow = typical(duration=30.0, platform=pf, steer_rate_max=1.5)
+    assert free.max() > 2.0 and steering_peaks(slow, pf).max() <= 1.5
+    for vt in variants(slow).values():
+        within(vt, Limits())
+
+
+def turning_run(turn: float, heading: float) -> Trajectory:
+    """0.3 m/s along x from rest (1 s ramp), the direction of travel turned to ``heading``
+    [rad] over ``turn`` s from t = 3 s (minimum jerk), stop at 9 s, rest until 10 s; ω = 0."""
+    from ropod_sysid.trajectory.blends import _quintic
+
+    t = np.arange(2001) * 0.005
+    speed = 0.3 * (_quintic(t)[0] - _quintic(t - 8.0)[0])
+    gamma = heading * _quintic((t - 3.0) / turn)[0]
+    return Trajectory.from_twist(t, speed * np.cos(gamma), speed * np.sin(gamma), 0 * t)
+
+
+def test_check_flags_the_steering_rate(two_steered):
+    """A quarter turn of the direction of travel in 0.2 s steers both wheels at
+    (π/2)·1.875/0.2 s = 14.7 rad/s: the check fails on it (text and JSON); in 2 s it passes.
+    (The base's lateral acceleration, 0.3 m/s × 14.7 rad/s, is allowed here.)"""
+    fast = check(turning_run(0.2, np.pi / 2), two_steered, Limits(a_max=5.0), params=BASE)
+    assert not fast.ok
+    assert {f.what for f in fast.findings} == {"steering rate of unit 1 [rad/s]",
+                                                "steering rate of unit 2 [rad/s]"}
+    assert fast.peaks["steer_rate"] == pytest.approx(np.pi / 2 * 1.875 / 0.2, rel=0.01)
+    assert fast.findings[0].text().startswith("steering rate of unit 1 [rad/s]: 14.")
+    assert "steer rate |β̇| (predicted) [rad/s]" in fast.text() and "EXCEEDED" in fast.text()
+    data = json.loads(json.dumps(fast.to_dict()))
+    assert data["ok"] is False and data["limits"]["steer_rate_max"] == 3.42
+    assert set(data["steer_rate_max"]) == set(VARIANTS)
+    assert data["steer_rate_max"]["original"]["1"] == pytest.approx(fast.peaks["steer_rate"])
+    assert set(data["wheel_rate_max"]["original"]) == {"cur_1D", "cur_2D"}  # drives only
+    slow = check(turning_run(2.0, np.pi / 2), two_steered, params=BASE)
+    assert slow.ok and slow.peaks["steer_rate"] == pytest.approx(np.pi / 2 * 1.875 / 2, rel=0.01)
+
+
+def test_singular_report_through_and_clear_of_a_singular_configuration(two_steered):
+    """Two wheels at (±0.3, 0) translating along β: the constraint rows' base block has
+    σ_2/σ_1 = 0.3 |cos β| (rows (−sin β, cos β, ±0.3 cos β)), so a run that turns from x to y
+    is near singular (< 0.1) from β = acos(1/3) on, through its stop and its rest; one that
+    turns to 45° never is (least ratio 0.3 cos 45°)."""
+    traj = turning_run(2.0, np.pi / 2)
+    rep = check(traj, two_steered, params=BASE).singular
+    assert rep is not None and rep.rank == 2 and rep.margin == 0.1
+    from ropod_sysid.trajectory.blends import _quintic
+
+    gamma = np.pi / 2 * _quintic((traj.t - 3.0) / 2.0)[0]
+    near = 0.3 * np.abs(np.cos(gamma)) < 0.1
+    moving = traj.speed() >= 0.01
+    w = np.gradient(traj.t)
+    np.testing.assert_allclose(rep.fraction, (near * w).sum() / w.sum(), atol=1e-3)
+    np.testing.assert_allclose(rep.moving_fraction, (near & moving) @ w / (moving @ w), atol=1e-3)
+    t_on = traj.t[np.argmax(near)]
+    np.testing.assert_allclose(rep.longest_start, t_on)
+    np.testing.assert_allclose(rep.longest, 10.0 - t_on, atol=0.01)
+    assert rep.min_ratio.max() < 1e-9 and 0.3 < rep.moving_fraction[0] < rep.fraction[0]
+    text = check(traj, two_steered, params=BASE).text()
+    assert "the fit loses the base rows for up to " in text
+    clear = check(turning_run(2.0, np.pi / 4), two_steered, params=BASE)
+    data = clear.to_dict()["singular"]["variants"]
+    for v in VARIANTS:
+        assert data[v]["fraction"] == data[v]["moving_fraction"] == data[v]["longest"] == 0.0
+        assert data[v]["longest_start"] is None
+        assert data[v]["min_ratio"] == pytest.approx(0.3 * np.cos(np.pi / 4), rel=1e-6)
+    assert "the fit loses" not in clear.text()
+
+
+def test_typical_steers_clear_of_singular_configurations(two_steered, four_steered):
+    """Seed 001's two wheels are singular in a rotation in place and a sideways crab: the
+    typical run rotates about a point 0.075 m beside the origin and crabs at 60°, and is near
+    singular for less than 2 % of its moving time; four wheels at the corners never are."""
+    from ropod_sysid.trajectory import run_singular_report
+
+    two = run_singular_report(typical(duration=60.0, platform=two_steered), two_steered)
+    assert two is not None and 0 < two.moving_fraction.max() < 0.02 and two.longest.max() < 0.5
+    four = run_singular_report(typical(duration=30.0, platform=four_steered), four_steered)
+    assert four is not None and four.fraction.max() == 0.0 and four.min_ratio.min() > 0.19
+    assert run_singular_report(typical(duration=12.0), load_platform(OMNI)) is None
+
+
+def test_cli_steering_rate_and_singular_report(tmp_path):
+    runner = CliRunner()
+    out = tmp_path / "run"
+    res = runner.invoke(main, ["trajectory", "typical", "--platform", str(STEERED), "--duration",
+                               "30", "--steer-rate-max", "2", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "near singular configurations (the fit leaves out the base rows): 0.0 % of the " \
+        "moving time" in res.output
+    args = ["trajectory", "check", str(out / "original.csv"), "--platform", str(STEERED)]
+    params = tmp_path / "base.json"
+    params.write_text(json.dumps(BASE))
+    res = runner.invoke(main, [*args, "--params", str(params), "--json", "--steer-rate-max",
+                               "2"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["ok"] and data["limits"]["steer_rate_max"] == 2.0
+    assert 1.0 < max(data["steer_rate_max"]["negated"].values()) <= 2.0
+    assert data["singular"]["variants"]["mirrored"]["moving_fraction"] == 0.0
+    res = runner.invoke(main, [*args, "--params", str(params), "--json", "--steer-rate-max",
+                               "1"])
+    assert json.loads(res.output)["ok"] is False
+    for sub, value in [("typical", "0"), ("check", "-1"), ("optimize", "nan")]:
+        where = {"typical": ["--out", str(tmp_path / "x")],
+                 "check": [str(out / "original.csv"), "--platform", str(STEERED)],
+                 "optimize": ["--out", str(tmp_path / "x"), "--platform", str(STEERED)]}[sub]
+        line = one_line(runner.invoke(main, ["trajectory", sub, *where, "--steer-rate-max",
+                                             value]))
+        assert line == f"error: --steer-rate-max {value}: must be a finite number > 0 rad/s"
+    assert not (tmp_path / "x").exists()

@@ -97,11 +97,9 @@ def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float =
     v = vt * keep[..., None]
     proj = np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
     if margin > 0 or slip > 0:
-        base = np.linalg.svd(g[:, :, :3], compute_uv=False)  # (N, min(C, 3))
-        regular = min(base.shape[1], CONSISTENT_RANK)  # the rank away from singularities
-        near = base[:, regular - 1] < margin * base[:, 0]
-        if slip > 0 and base.shape[1] > CONSISTENT_RANK:
-            near |= base[:, CONSISTENT_RANK] > slip * base[:, 0]
+        near = base_singular_ratio(g) < margin
+        if slip > 0 and g.shape[1] > CONSISTENT_RANK:
+            near |= base_singular_ratio(g, CONSISTENT_RANK + 1) > slip
         proj[near, :3, :] = 0.0
         proj[near, :, :3] = 0.0
     return proj
@@ -118,6 +116,21 @@ def consistent_constraints(g: np.ndarray, c: np.ndarray, rank: int = CONSISTENT_
     ur = u[:, :, :rank]
     keep = np.einsum("nci,nei->nce", ur, ur)  # (N, C, C) projector onto the leading rows
     return np.einsum("nce,ned->ncd", keep, g), np.einsum("nce,ne->nc", keep, c)
+
+
+def base_singular_ratio(g: np.ndarray, regular: int | None = None) -> np.ndarray:
+    """How near each sample's constraint rows G (N, C, D) are to losing rank: σ_r / σ_1 (N,)
+    of their base block G[:, :, :3], σ_r its r-th largest singular value, r the rank the
+    platform has when regular — ``regular``, else that of C rows consistent with one
+    instantaneous centre, min(C, :data:`CONSISTENT_RANK`). 0 where the block has lost rank
+    (001 Property 3–4: all wheel axles on one line); :func:`null_projector` leaves out the
+    base rows where it is below its ``margin``. (With ``regular`` = CONSISTENT_RANK + 1: how
+    far the rows miss one centre, its slip test.)"""
+    base = np.linalg.svd(g[:, :, :3], compute_uv=False)  # (N, min(C, 3))
+    if regular is None:
+        regular = min(g.shape[1], CONSISTENT_RANK)
+    regular = min(max(regular, 1), base.shape[1])
+    return base[:, regular - 1] / np.maximum(base[:, 0], np.finfo(float).tiny)
 
 
 def _rows(values: np.ndarray, idx: np.ndarray, size: int, axes: tuple[int, ...] = (1,)
@@ -225,6 +238,7 @@ class PlatformModel:
         self.n_dof = extra  # D = 3 + E
         self.coordinate_channels = np.concatenate(channels).astype(int)  # (E,) angle channels
         self.constrained = any(hasattr(u, "constraint_jacobian") for _, u in self.groups)
+        self._motion_rank: int | None = None
 
     @property
     def row_kinds(self) -> np.ndarray:
@@ -275,6 +289,31 @@ class PlatformModel:
                            axis=1)
         c = np.concatenate([p[1] for p in parts], axis=1)
         return (g, c) if exact else consistent_constraints(g, c)
+
+    @property
+    def motion_rank(self) -> int | None:
+        """Rank of the base block of the constraint rows while the platform moves regularly:
+        the largest over three generic twists, every unit at the angles it takes for that
+        motion (:meth:`initial_angles`: steered wheels along their centre velocities, so that
+        the axles meet at the instantaneous centre); None without constraints. (Angles that
+        fit no motion — measured ones, with noise — may give a higher rank.)"""
+        if not self.constrained:
+            return None
+        if self._motion_rank is None:
+            twists = np.array([[0.31, 0.17, 0.53], [-0.23, 0.41, -0.37], [0.11, -0.29, 0.83]])
+            angles = np.stack([self.initial_angles(tw) for tw in twists])
+            st = self.state(np.zeros((3, 3)), twists, angles, np.zeros_like(angles))
+            g = self.constraints(st)[0]  # type: ignore[index]
+            sv = np.linalg.svd(g[:, :, :3], compute_uv=False)
+            self._motion_rank = int(np.sum(sv > RANK_TOLERANCE * sv[:, :1], axis=1).max())
+        return self._motion_rank
+
+    def singular_ratio(self, st: State) -> np.ndarray | None:
+        """σ_r / σ_1 (N,) of the base block of the constraint rows at ``st``, r the
+        :attr:`motion_rank` (:func:`base_singular_ratio`); None without constraints. Below
+        :data:`SINGULAR_MARGIN` the identification leaves out the base rows."""
+        con = self.constraints(st)
+        return None if con is None else base_singular_ratio(con[0], self.motion_rank)
 
     def projector(self, st: State) -> np.ndarray | None:
         """P = I − G⁺G (N, D, D) onto the motions the constraints allow (None: unconstrained)."""

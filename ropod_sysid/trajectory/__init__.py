@@ -23,8 +23,11 @@ fast as the direction ψ_i does. A unit flips (δ_i − ψ_i passes ±π/2 on it
 side) when P_i reverses or passes near zero while turning. Limits, as in the thesis's
 experiments: |v| = |(vx, vy)| ≤ v_max, |a| ≤ a_max (the world acceleration of the base origin,
 centripetal part included), |ω| ≤ ω_max, |ω̇| ≤ α_max, |δ̇_i| ≤ pivot_rate_max (units with a
-turning joint) and optionally |φ̇| ≤ wheel_rate_max for every driven wheel. Omni wheels have no
-turning joint: there are no wheel flips to plan for.
+turning joint), |β̇_i| ≤ steer_rate_max (units with an actuated steering: the steered wheel, whose
+planned steering follows its wheel-centre velocity) and optionally |φ̇| ≤ wheel_rate_max for
+every driven wheel. Omni wheels have no turning joint: there are no wheel flips to plan for.
+Steered wheels add constraint rows, which lose rank where all wheel axles lie on one line; the
+fit leaves out the base rows near there, and ``check`` reports the time a run spends there.
 
 Modules (every public name is re-exported here):
 
@@ -37,10 +40,10 @@ Modules (every public name is re-exported here):
 * :mod:`~ropod_sysid.trajectory.blends` — minimum-jerk twist programs;
 * :mod:`~ropod_sysid.trajectory.typical_run` — :func:`typical`;
 * :mod:`~ropod_sysid.trajectory.identifiability` — :func:`conditioning`, :func:`predicted_std`;
-* :mod:`~ropod_sysid.trajectory.precheck` — :func:`check` (limits, floor, pivot and wheel
-  rates, the
-  predicted stacked regressor's condition number and rank and each parameter's predicted
-  standard deviation);
+* :mod:`~ropod_sysid.trajectory.precheck` — :func:`check` (limits, floor, pivot, steering and
+  wheel rates, the time near singular configurations (:func:`singular_report`), the predicted
+  stacked regressor's condition number and rank and each parameter's predicted standard
+  deviation);
 * :mod:`~ropod_sysid.trajectory.plotting` — :func:`plot`;
 * :mod:`~ropod_sysid.trajectory.fourier` and :mod:`~ropod_sysid.trajectory.excitation` —
   :func:`optimize` (finite Fourier series, Swevers et al.).
@@ -70,6 +73,7 @@ from ropod_sysid.trajectory.identifiability import (
 from ropod_sysid.trajectory.limits import (
     DEFAULT_FLOOR,
     PIVOT_DESIGN_MARGIN,
+    STEER_RATE_MAX,
     Floor,
     Limits,
     PlanningError,
@@ -77,8 +81,22 @@ from ropod_sysid.trajectory.limits import (
 from ropod_sysid.trajectory.limits import _check_floor as _check_floor
 from ropod_sysid.trajectory.pivots import PivotPrediction, predict_pivots, trailing_pivots
 from ropod_sysid.trajectory.plotting import plot
-from ropod_sysid.trajectory.precheck import CheckReport, Finding, check, true_parameters
-from ropod_sysid.trajectory.prediction import Prediction, predict_angles, trailing_points
+from ropod_sysid.trajectory.precheck import (
+    MOVING_SPEED,
+    CheckReport,
+    Finding,
+    SingularReport,
+    check,
+    run_singular_report,
+    singular_report,
+    true_parameters,
+)
+from ropod_sysid.trajectory.prediction import (
+    Prediction,
+    predict_angles,
+    steering_points,
+    trailing_points,
+)
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, variant, variants
 from ropod_sysid.trajectory.setpoints import (
     COLUMNS,
@@ -93,6 +111,8 @@ from ropod_sysid.trajectory.setpoints import (
 from ropod_sysid.trajectory.typical_run import (
     DESIGN_MARGIN,
     LOBES,
+    SIDE_DIRECTIONS,
+    SPIN_OFFSETS,
     SPIN_START_MIN,
     TYPICAL_MAX_DURATION,
     typical,
@@ -100,13 +120,16 @@ from ropod_sysid.trajectory.typical_run import (
 
 __all__ = [
     "COLUMNS", "DEFAULT_FLOOR", "DESIGN_MARGIN", "KAPPA_FRACTION", "LOBES", "MAX_HARMONICS",
-    "MAX_LAG", "NU_MIN", "OPTIMIZE_DURATION", "PIVOT_DESIGN_MARGIN", "POSE_COLUMNS", "RANK_TOL",
-    "RHO_BETA", "RHO_KAPPA", "SPEED_WEIGHT", "SPIN_START_MIN", "TWIST_COLUMNS",
-    "TYPICAL_MAX_DURATION", "VARIANTS", "VARIANT_SIGNS",
+    "MAX_LAG", "MOVING_SPEED", "NU_MIN", "OPTIMIZE_DURATION", "PIVOT_DESIGN_MARGIN",
+    "POSE_COLUMNS", "RANK_TOL", "RHO_BETA", "RHO_KAPPA", "SIDE_DIRECTIONS", "SPEED_WEIGHT",
+    "SPIN_OFFSETS", "SPIN_START_MIN", "STEER_RATE_MAX", "TWIST_COLUMNS", "TYPICAL_MAX_DURATION",
+    "VARIANTS", "VARIANT_SIGNS",
     "CheckReport", "Conditioning", "Finding", "Floor", "FourierFamily", "Limits",
-    "OptimizeResult", "PivotPrediction", "PlanningError", "Prediction", "Trajectory",
+    "OptimizeResult", "PivotPrediction", "PlanningError", "Prediction", "SingularReport",
+    "Trajectory",
     "check", "conditioning", "integrate_pose", "optimize", "plot", "predict_angles",
-    "predict_pivots", "predicted_std", "read_trajectory_csv", "trailing_pivots",
+    "predict_pivots", "predicted_std", "read_trajectory_csv", "run_singular_report",
+    "singular_report", "steering_points", "trailing_pivots",
     "trailing_points", "trajectory_csv_text", "true_parameters", "typical",
     "variant", "variants", "write_trajectory_csv",
 ]

@@ -3,8 +3,9 @@
 Every change of the twist (vx, vy [m/s], ω [rad/s]) is a blend a + (b − a) s(τ) with the
 minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, so the acceleration is continuous (jumps in it
 bias the identification); each blend is as short as the limits allow (:func:`_blend_time`: the
-rotational and world acceleration and the quasi-steady pivot rate of eq. 8a). :class:`_Plan`
-chains blends and holds into manoeuvres (corners, rotations in place, stop-and-go).
+rotational and world acceleration, the quasi-steady pivot rate of eq. 8a and the steering rate of
+steered wheels). :class:`_Plan` chains blends and holds into manoeuvres (corners, rotations in
+place, stop-and-go).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ropod_sysid.model.units.steered import PLAN_SPEED
 from ropod_sysid.trajectory.limits import Limits, PlanningError
 from ropod_sysid.trajectory.setpoints import integrate_pose
 
@@ -31,14 +33,33 @@ _TAU = np.linspace(0.0, 1.0, 257)
 _S, _DS, _DDS = _quintic(_TAU)
 
 
+def _direction_rate(a: np.ndarray, d: np.ndarray, points: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Along the blend a + s(τ) d of the twist: the velocities P_i = v + ω S r_i of ``points``
+    r_i (m, 2) in the base frame — at the start (m, 2), their change (m, 2), cross(P_i, d P_i)
+    (m,), constant along the blend — and |P_i|² on the blend's grid (257, m). The direction of
+    P_i turns at cross / |P_i|² · ds/dτ / T for a blend of T seconds."""
+    sp = np.stack([-points[:, 1], points[:, 0]], axis=1)  # S r_i
+    pa = a[:2][None, :] + a[2] * sp  # (m, 2) P_i at the start
+    dp = d[:2][None, :] + d[2] * sp
+    cross = pa[:, 0] * dp[:, 1] - pa[:, 1] * dp[:, 0]
+    p = pa[None] + _S[:, None, None] * dp[None]
+    return pa, dp, cross, (p * p).sum(-1)
+
+
 def _blend_time(a: np.ndarray, b: np.ndarray, caps: Limits, pivots: np.ndarray | None,
-                t_min: float = 0.4) -> float:
+                t_min: float = 0.4, steering: np.ndarray | None = None) -> float:
     """Shortest duration [s] of a minimum-jerk blend of the twist from level a to level b.
 
     During the blend the twist is a + (b − a) s(τ): continuous acceleration, zero at both ends.
     The duration meets the rotational acceleration cap, the world acceleration cap (with the
-    centripetal part ω S v, which does not shrink with a longer blend) and, with pivots, the
-    quasi-steady pivot rate ψ̇_i = cross(P_i, Ṗ_i)/|P_i|² of every unit.
+    centripetal part ω S v, which does not shrink with a longer blend), with pivots the
+    quasi-steady pivot rate ψ̇_i = cross(P_i, Ṗ_i)/|P_i|² of every unit, and with ``steering``
+    (the steering axes of steered wheels) their steering rate, which is that same rate of
+    their wheel-centre velocity (the planned steering follows it exactly while the wheel moves
+    at least :data:`~ropod_sysid.model.units.steered.PLAN_SPEED`, below which |P_i| is taken
+    as that speed: the steering turns smoothly there, and ``check`` verifies it). A steered
+    wheel may reverse (its drive does): no error for a velocity through zero.
     """
     d = b - a
     t_req = t_min
@@ -59,12 +80,7 @@ def _blend_time(a: np.ndarray, b: np.ndarray, caps: Limits, pivots: np.ndarray |
         x_hi = (-gc[m] + np.sqrt(np.maximum(gc[m] ** 2 - gg[m] * (cc[m] - a2), 0.0))) / gg[m]
         t_req = max(t_req, 1.0 / max(float(x_hi.min()), 1e-12))
     if pivots is not None and caps.pivot_rate_max is not None:
-        sp = np.stack([-pivots[:, 1], pivots[:, 0]], axis=1)  # S r_i
-        pa = a[:2][None, :] + a[2] * sp  # (n, 2) P_i at the start
-        dp = d[:2][None, :] + d[2] * sp
-        cross = pa[:, 0] * dp[:, 1] - pa[:, 1] * dp[:, 0]  # constant along a linear blend
-        p = pa[None] + _S[:, None, None] * dp[None]
-        p2 = (p * p).sum(-1)
+        pa, dp, cross, p2 = _direction_rate(a, d, pivots)
         scale = np.linalg.norm(pa, axis=1) * np.linalg.norm(dp, axis=1) + 1e-300
         turning = np.abs(cross) > 1e-9 * scale
         # a pivot velocity that passes through zero inside the blend reverses: the unit flips
@@ -78,6 +94,10 @@ def _blend_time(a: np.ndarray, b: np.ndarray, caps: Limits, pivots: np.ndarray |
             with np.errstate(divide="ignore"):
                 rate = np.abs(cross[turning])[None] / p2[:, turning] * _DS[:, None]
             t_req = max(t_req, float(rate.max()) / caps.pivot_rate_max)
+    if steering is not None and caps.steer_rate_max is not None:
+        _, _, cross, p2 = _direction_rate(a, d, steering)
+        rate = np.abs(cross)[None] / np.maximum(p2, PLAN_SPEED**2) * _DS[:, None]
+        t_req = max(t_req, float(rate.max()) / caps.steer_rate_max)
     if not math.isfinite(t_req):
         raise PlanningError("a planned blend needs an infinite time (pivot velocity near zero)")
     return float(t_req)
@@ -90,9 +110,11 @@ class _Plan:
     a == b). The heading change of a segment is exact: T (ω_a + ω_b)/2.
     """
 
-    def __init__(self, caps: Limits, pivots: np.ndarray | None, theta0: float = 0.0) -> None:
+    def __init__(self, caps: Limits, pivots: np.ndarray | None, theta0: float = 0.0,
+                 steering: np.ndarray | None = None) -> None:
         self.caps = caps
         self.pivots = pivots
+        self.steering = steering  # steering axes of steered wheels (steering-rate cap)
         self.segs: list[list] = []
         self.level = np.zeros(3)
         self.theta = theta0
@@ -101,7 +123,8 @@ class _Plan:
     def blend_time(self, a: np.ndarray, b: np.ndarray) -> float:
         key = tuple(np.round(np.concatenate([a, b]), 12))
         if key not in self._cache:
-            self._cache[key] = _blend_time(a, b, self.caps, self.pivots)
+            self._cache[key] = _blend_time(a, b, self.caps, self.pivots,
+                                           steering=self.steering)
         return self._cache[key]
 
     def to(self, b: Sequence[float], t: float | None = None) -> float:

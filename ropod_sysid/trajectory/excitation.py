@@ -5,8 +5,10 @@
 the best condition number (or log-determinant) of the stacked regressor A_ID,ext of the four
 variants (Sec. VI-A, VI-C), unit angles in each type's quasi-steady closed form
 (:meth:`UnitType.quasi_steady_angles`: swivel units trailing their pivots, eq. 8a; omni wheels
-integrating their rates), within the limits [m/s, m/s², rad/s, rad/s², and optionally the wheel
-rates] and the floor [m]. Any mix of unit types.
+integrating their rates; steered wheels along their planned steering), within the limits [m/s,
+m/s², rad/s, rad/s², the pivot and steering rates, and optionally the wheel rates] and the floor
+[m]. Any mix of unit types. On platforms with constraint rows (steered wheels) the samples near a
+singular configuration, whose base rows the fit leaves out, are penalised as well.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.model.assembly import SINGULAR_MARGIN
 from ropod_sysid.noise import SensorNoise
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.fourier import FourierFamily, _scaled_twist
@@ -42,6 +45,7 @@ from ropod_sysid.trajectory.setpoints import Trajectory
 OPTIMIZE_DURATION = (5.0, 600.0)  # optimize(): shortest and longest run [s]
 MAX_HARMONICS = 20  # optimize(): most harmonics of each Fourier series
 SPEED_WEIGHT = 0.5  # optimize(): weight of −log(mean speed / v_max) in the objective
+SINGULAR_WEIGHT = 1.0  # optimize(): weight of the fraction of samples near singular
 MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
 SIGMA_RERANK = 6  # optimize("sigma"): candidates within the limits weighed by check at the end
 OBJECTIVES = ("sigma", "cond", "logdet")  # optimize(): what it minimises (the first: default)
@@ -140,8 +144,12 @@ class _Objective:
             peak = np.abs(pred.turning[:, :2]).max(axis=(1, 2, 3))
             penalty += np.maximum(peak / (PIVOT_DESIGN_MARGIN * self.limits.pivot_rate_max)
                                   - 1.0, 0.0)
+        if self.limits.steer_rate_max is not None and pred.steering_units.any():
+            steer = np.abs(pred.steering[..., pred.steering_units]).max(axis=(1, 2, 3))
+            penalty += np.maximum(steer / (PIVOT_DESIGN_MARGIN * self.limits.steer_rate_max)
+                                  - 1.0, 0.0)
         if self.limits.wheel_rate_max is not None:
-            wheel = np.abs(pred.actuator_rates).max(axis=(1, 2, 3))
+            wheel = np.abs(pred.wheel_rates).max(axis=(1, 2, 3), initial=0.0)
             penalty += np.maximum(wheel / (PIVOT_DESIGN_MARGIN * self.limits.wheel_rate_max)
                                   - 1.0, 0.0)
         idx = self.eval_idx
@@ -154,9 +162,14 @@ class _Objective:
                               pred.angles[:, :, idx].reshape(n_s * 4 * idx.size, -1))
         a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, d),
                                 self.friction)  # type: ignore[arg-type]
+        # the fraction of samples near singular, whose base rows the fit leaves out
+        ratio = self.model.singular_ratio(st)
+        singular = (np.zeros(n_s) if ratio is None else
+                    (ratio.reshape(n_s, -1) < SINGULAR_MARGIN).mean(axis=1))
+        singular = SINGULAR_WEIGHT * singular
         if self.sigma is not None:
             value = self._sigma_value(a.reshape(n_s, -1, d, a.shape[-1]), st)
-            return value + 10.0 * penalty + 100.0 * penalty**2
+            return value + 10.0 * penalty + 100.0 * penalty**2 + singular
         a = a.reshape(n_s, -1, a.shape[-1])
         norms = np.linalg.norm(a, axis=1)
         a = a / np.where(norms > 0, norms, 1.0)[:, None, :]
@@ -173,7 +186,7 @@ class _Objective:
         # tie-breaker towards brisk runs: the scaled regressor does not see the signal level
         speed = np.linalg.norm(tw[..., :2], axis=-1).mean(axis=1) / self.limits.v_max
         value = value - SPEED_WEIGHT * np.log(np.maximum(speed, 1e-6))
-        return value + 10.0 * penalty + 100.0 * penalty**2
+        return value + 10.0 * penalty + 100.0 * penalty**2 + singular
 
 
     def _sigma_value(self, a: np.ndarray, st: object) -> np.ndarray:
@@ -448,13 +461,17 @@ def _verify(traj: Trajectory, platform: Platform, limits: Limits,
     off = _off_floor(var, floor)
     if off is not None:
         return False, f"floor ({off})"
-    if limits.pivot_rate_max is not None or limits.wheel_rate_max is not None:
+    if (limits.pivot_rate_max is not None or limits.wheel_rate_max is not None
+            or limits.steer_rate_max is not None):
         pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]), platform)
         peak = pred.turning_peak
         if limits.pivot_rate_max is not None and (peak > limits.pivot_rate_max
                                                   or pred.flagged):
             return False, f"pivot rate {peak:.2f} rad/s"
-        wheel = float(np.abs(pred.actuator_rates).max())
+        steer = pred.steering_peak
+        if limits.steer_rate_max is not None and steer > limits.steer_rate_max:
+            return False, f"steering rate {steer:.2f} rad/s"
+        wheel = float(np.abs(pred.wheel_rates).max(initial=0.0))
         if limits.wheel_rate_max is not None and wheel > limits.wheel_rate_max:
             return False, f"wheel rate {wheel:.3g} rad/s"
     return True, ""

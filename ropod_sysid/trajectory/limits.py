@@ -3,11 +3,13 @@
 Limits, as in the thesis's experiments: |v| = |(vx, vy)| ≤ v_max [m/s], |a| ≤ a_max [m/s²] (the
 world acceleration of the base origin, centripetal part included), |ω| ≤ ω_max [rad/s],
 |ω̇| ≤ α_max [rad/s²], |δ̇_i| ≤ pivot_rate_max [rad/s] for units with a turning joint (the
-swivel's pivot; the disturbance observer ignores the data above 1.5 rad/s, Sec. VII-C) and,
-optionally, |φ̇| ≤ wheel_rate_max [rad/s] for every actuated joint (the units' ``actuator_rates``,
-e.g. a motor's top speed). The floor is the rectangle (x_min, x_max, y_min, y_max) [m] the base
-origin must stay in, in the world frame of the planned pose (start at the origin). A run that
-cannot be planned within them raises :class:`PlanningError`.
+swivel's pivot; the disturbance observer ignores the data above 1.5 rad/s, Sec. VII-C),
+|β̇_i| ≤ steer_rate_max [rad/s] for units with an actuated steering (the steered wheel's steering
+motor; seed 001's vehicle: 195.95 °/s) and, optionally, |φ̇| ≤ wheel_rate_max [rad/s] for every
+other actuated joint (the units' ``actuator_rates``, e.g. a motor's top speed). The floor is the
+rectangle (x_min, x_max, y_min, y_max) [m] the base origin must stay in, in the world frame of
+the planned pose (start at the origin). A run that cannot be planned within them raises
+:class:`PlanningError`.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ Floor = tuple[float, float, float, float]
 DEFAULT_FLOOR: Floor = (-3.0, 3.0, -2.0, 2.0)
 # typical(), optimize(): the pivot rate (quasi-steady) is planned at 80 % of its limit
 PIVOT_DESIGN_MARGIN = 0.8
+STEER_RATE_MAX = 3.42  # default steering-rate limit [rad/s]: seed 001's 195.95 °/s
 
 
 @dataclass(frozen=True)
@@ -42,8 +45,12 @@ class Limits:
         Pivot rate |δ̇_i| of every unit with a turning joint (the swivel) [rad/s], predicted
         with the kinematic model; None: no limit (wheel flips allowed).
     wheel_rate_max : float or None
-        Rate |φ̇| of every actuated joint (driven wheel) [rad/s], predicted with the units'
-        inverse kinematics; None (default): no limit.
+        Rate |φ̇| of every actuated joint that drives a wheel [rad/s], predicted with the
+        units' inverse kinematics; None (default): no limit.
+    steer_rate_max : float or None
+        Steering rate |β̇_i| of every unit with an actuated steering (the steered wheel's
+        steering motor) [rad/s], predicted from its planned steering; None: no limit.
+        Default :data:`STEER_RATE_MAX`.
     """
 
     v_max: float = 1.0
@@ -52,23 +59,28 @@ class Limits:
     alpha_max: float = 1.0
     pivot_rate_max: float | None = 1.5
     wheel_rate_max: float | None = None
+    steer_rate_max: float | None = STEER_RATE_MAX
 
     def __post_init__(self) -> None:
-        for name in ("v_max", "a_max", "w_max", "alpha_max", "pivot_rate_max",
-                     "wheel_rate_max"):
+        optional = ("pivot_rate_max", "wheel_rate_max", "steer_rate_max")
+        for name in ("v_max", "a_max", "w_max", "alpha_max", *optional):
             value = getattr(self, name)
-            if value is None and name in ("pivot_rate_max", "wheel_rate_max"):
+            if value is None and name in optional:
                 continue
             if not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
                 raise InputError(f"limit {name} must be a positive number, got {value!r}")
 
-    def scaled(self, factor: float, pivot_factor: float | None = None) -> Limits:
-        """All limits times ``factor`` (the pivot rate times ``pivot_factor`` if given)."""
+    def scaled(self, factor: float, pivot_factor: float | None = None,
+               steer_factor: float | None = None) -> Limits:
+        """All limits times ``factor`` (the pivot rate times ``pivot_factor``, the steering
+        rate times ``steer_factor`` if given)."""
         pf = factor if pivot_factor is None else pivot_factor
+        sf = factor if steer_factor is None else steer_factor
         return Limits(self.v_max * factor, self.a_max * factor, self.w_max * factor,
                       self.alpha_max * factor,
                       None if self.pivot_rate_max is None else self.pivot_rate_max * pf,
-                      None if self.wheel_rate_max is None else self.wheel_rate_max * factor)
+                      None if self.wheel_rate_max is None else self.wheel_rate_max * factor,
+                      None if self.steer_rate_max is None else self.steer_rate_max * sf)
 
 
 def _check_floor(floor: Sequence[float]) -> Floor:

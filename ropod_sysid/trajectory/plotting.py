@@ -1,6 +1,7 @@
 """Plot of a planned run: the path of the four variants on the floor [m], and the speed [m/s],
 acceleration [m/s²], rotation rate and, for units with a turning joint, the predicted turning
-rates (the swivel's pivot rates, eq. 8a) [rad/s] over time."""
+rates (the swivel's pivot rates, eq. 8a), for units with an actuated steering the planned
+steering rates [rad/s] over time."""
 
 from __future__ import annotations
 
@@ -12,7 +13,11 @@ import numpy as np
 from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Limits, _check_floor
-from ropod_sysid.trajectory.prediction import _variant_prediction, trailing_points
+from ropod_sysid.trajectory.prediction import (
+    _variant_prediction,
+    steering_points,
+    trailing_points,
+)
 from ropod_sysid.trajectory.run_variants import variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -58,6 +63,12 @@ def plot(traj: Trajectory, path: str | Path, floor: Sequence[float] = DEFAULT_FL
                  label="max |δ̇| [rad/s]", lw=0.8)
         if limits.pivot_rate_max is not None:
             ax1.axhline(limits.pivot_rate_max, color="0.5", ls=":", lw=0.8)
+    if platform is not None and steering_points(platform) is not None:
+        fine, _, pred = _variant_prediction(traj, platform)
+        ax1.plot(fine.t, np.abs(pred.steering[..., pred.steering_units]).max(axis=(0, 2)),
+                 label="max |β̇| [rad/s]", lw=0.8)
+        if limits.steer_rate_max is not None:
+            ax1.axhline(limits.steer_rate_max, color="0.5", ls="-.", lw=0.8)
     ax1.axhline(limits.v_max, color="0.5", ls="--", lw=0.8)
     ax1.set_xlabel("t [s]")
     ax1.set_title("setpoints and limits")

@@ -2,10 +2,13 @@
 
 Limits and where they are broken, the floor, the unit angles predicted along all four variants
 by every unit type (:func:`ropod_sysid.trajectory.prediction.predict_angles`): turning rates and
-flags of the types that have them (the swivel: pivot rates of eq. 8a and wheel flips) and the
-rate of every driven wheel, and the identifiability the run promises: the condition number and
-rank of the stacked regressor A_ID,ext of the four variants and the predicted standard deviation
-of every parameter (:mod:`ropod_sysid.trajectory.identifiability`).
+flags of the types that have them (the swivel: pivot rates of eq. 8a and wheel flips), steering
+rates of the types with an actuated steering (the steered wheel) and the rate of every driven
+wheel; on platforms with constraint rows (steered wheels) the time spent near a singular
+configuration, where the fit leaves out the base rows (:func:`singular_report`); and the
+identifiability the run promises: the condition number and rank of the stacked regressor
+A_ID,ext of the four variants and the predicted standard deviation of every parameter
+(:mod:`ropod_sysid.trajectory.identifiability`).
 """
 
 from __future__ import annotations
@@ -64,6 +67,116 @@ def _runs(mask: np.ndarray, t: np.ndarray, values: np.ndarray, what: str, limit:
     return out
 
 
+MOVING_SPEED = 0.01  # [m/s] the platform moves while a unit's attachment point is this fast
+
+
+@dataclass
+class SingularReport:
+    """Time near singular configurations of the four variants (:func:`singular_report`).
+
+    Near singular: σ_r/σ_1 of the base block of the stacked constraint rows G below ``margin``
+    (:data:`~ropod_sysid.model.assembly.SINGULAR_MARGIN`, r = ``rank``, the rank while moving
+    regularly: :attr:`~ropod_sysid.model.PlatformModel.motion_rank`); the fit leaves out the
+    base rows of those samples. Moving: some unit's attachment point at least ``moving_speed``
+    fast. Arrays (4,) per variant: ``fraction`` of the run's time and ``moving_fraction`` of
+    its moving time near singular, the ``longest`` stretch near singular [s] and its start
+    ``longest_start`` [s] (nan if none), ``min_ratio`` the least σ_r/σ_1.
+    """
+
+    margin: float
+    moving_speed: float
+    rank: int
+    fraction: np.ndarray
+    moving_fraction: np.ndarray
+    longest: np.ndarray
+    longest_start: np.ndarray
+    min_ratio: np.ndarray
+
+    def to_dict(self) -> dict[str, object]:
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        return {"margin": self.margin, "moving_speed": self.moving_speed, "rank": self.rank,
+                "variants": {v: {"fraction": float(self.fraction[i]),
+                                 "moving_fraction": float(self.moving_fraction[i]),
+                                 "longest": float(self.longest[i]),
+                                 "longest_start": num(self.longest_start[i]),
+                                 "min_ratio": float(self.min_ratio[i])}
+                             for i, v in enumerate(VARIANTS)}}
+
+    def text(self) -> list[str]:
+        out = [f"near-singular configurations (σ_{self.rank}/σ_1 of the constraint rows' base "
+               f"block < {self.margin:g}: the fit leaves out the base rows):",
+               f"{'variant':<18}{'of time':>9}{'of moving':>11}{'longest [s]':>16}"
+               f"{'min ratio':>11}"]
+        for i, v in enumerate(VARIANTS):
+            longest = (f"{self.longest[i]:.2f} @{self.longest_start[i]:>3.0f}s"
+                       if math.isfinite(self.longest_start[i]) else "-")
+            out.append(f"{v:<18}{100 * self.fraction[i]:>7.1f} %"
+                       f"{100 * self.moving_fraction[i]:>9.1f} %{longest:>16}"
+                       f"{self.min_ratio[i]:>11.3f}")
+        worst = float(self.moving_fraction.max())
+        if worst > 0:
+            out.append(f"the fit loses the base rows for up to {100 * worst:.1f} % of the moving "
+                       "time (all wheel axles near one line);")
+            out.append("only the units' own rows (steering) are left there")
+        return out
+
+
+def singular_report(t: np.ndarray, twists: np.ndarray, pred: Prediction, model: object
+                    ) -> SingularReport | None:
+    """The :class:`SingularReport` of V = 4 planned motions: base-frame twists (4, N, 3) at
+    times t (N,) with their predicted angles; None for a platform without constraint rows.
+    Vectorised over variants and samples (:meth:`PlatformModel.singular_ratio`)."""
+    from ropod_sysid.model.assembly import SINGULAR_MARGIN
+
+    if not model.constrained:  # type: ignore[attr-defined]
+        return None
+    n_var, n = twists.shape[:2]
+    q, qd, _ = _world_motion(t, twists)
+    st = model.state(q.reshape(-1, 3), qd.reshape(-1, 3),  # type: ignore[attr-defined]
+                     pred.angles.reshape(n_var * n, -1), pred.rates.reshape(n_var * n, -1))
+    ratio = model.singular_ratio(st).reshape(n_var, n)  # type: ignore[attr-defined]
+    near = ratio < SINGULAR_MARGIN
+    pos = model.platform.positions  # type: ignore[attr-defined]
+    u_x = twists[..., :1] - twists[..., 2:] * pos[:, 1]  # (4, N, n) attachment points
+    u_y = twists[..., 1:2] + twists[..., 2:] * pos[:, 0]
+    moving = (np.hypot(u_x, u_y) >= MOVING_SPEED).any(axis=-1)
+    w = np.gradient(t) if n > 1 else np.ones(1)  # the time each sample stands for [s]
+    frac = (near * w).sum(axis=1) / w.sum()
+    mov_time = (moving * w).sum(axis=1)
+    mov_frac = np.where(mov_time > 0, (near & moving) @ w / np.maximum(mov_time, 1e-300), 0.0)
+    # the longest stretch per variant: cumulative time, reset where not near
+    edge = np.diff(np.concatenate([np.zeros((n_var, 1), bool), near,
+                                   np.zeros((n_var, 1), bool)], axis=1).astype(np.int8), axis=1)
+    longest = np.zeros(n_var)
+    start = np.full(n_var, np.nan)
+    cum = np.concatenate([[0.0], np.cumsum(w)])
+    v_on, i_on = np.nonzero(edge == 1)
+    v_off, i_off = np.nonzero(edge == -1)  # same order: row-major, one end per start
+    if v_on.size:
+        span = cum[i_off] - cum[i_on]
+        for v in range(n_var):  # 4 variants, not samples
+            mine = np.flatnonzero(v_on == v)
+            if mine.size:
+                best = mine[np.argmax(span[mine])]
+                longest[v], start[v] = span[best], t[i_on[best]]
+    return SingularReport(SINGULAR_MARGIN, MOVING_SPEED, int(model.motion_rank),  # type: ignore[attr-defined]
+                          frac, mov_frac, longest, start, ratio.min(axis=1))
+
+
+def run_singular_report(traj: Trajectory, platform: Platform) -> SingularReport | None:
+    """:func:`singular_report` of a run's four variants (angles as predicted on the fine grid,
+    as :func:`check` does); None for a platform without constraint rows."""
+    from ropod_sysid.model import PlatformModel
+
+    model = PlatformModel(platform)
+    if not model.constrained:
+        return None
+    fine, twists, pred = _variant_prediction(traj, model)
+    return singular_report(fine.t, twists, pred, model)
+
+
 @dataclass
 class CheckReport:
     """Everything :func:`check` found out about a planned run.
@@ -73,7 +186,8 @@ class CheckReport:
     duration, samples : of the run
     limits, floor : what it was checked against
     peaks : name → maximum over the four variants of |v|, |a|, |ω|, |ω̇|, the turning rate
-        (``pivot_rate``: nan without units that turn) and the wheel rate
+        (``pivot_rate``: nan without units that turn), the steering rate (``steer_rate``: nan
+        without steered units) and the wheel rate
     findings : limits broken (with time range and variant), floor left, wheel flips
     pivot_peak : (4, n) maximum turning rate |δ̇| per variant and unit [rad/s] (nan for units
         without a turning joint); pivot_peak_time (4, n) [s]
@@ -82,8 +196,12 @@ class CheckReport:
     conditioning : of the stacked regressor of the four variants
     true_values, std, relative_std : (p,) parameters, predicted standard deviations and
         std / |true value| for noise σ_b = ``noise`` at ``log_rate``
-    wheel_peak : (4, A) maximum |φ̇| per variant and actuated joint [rad/s]; actuators : the
-        actuators' current channels (``cur_1L`` …), naming them
+    wheel_peak : (4, A) maximum |φ̇| per variant and actuated joint that drives a wheel
+        [rad/s]; actuators : those actuators' current channels (``cur_1L`` …), naming them
+    steer_peak : (4, n) maximum steering rate |β̇| per variant and unit [rad/s] (nan for units
+        without an actuated steering); steer_peak_time (4, n) [s]
+    singular : time near singular configurations (:class:`SingularReport`), None without
+        constraint rows
     """
 
     duration: float
@@ -110,11 +228,20 @@ class CheckReport:
     sensors: SensorNoise | None = None  # the sensor model of the std (else white σ_b = noise)
     sigma_hat: float = math.nan  # with sensors: the predicted σ̂ of the fit's weighted rows
     bias: np.ndarray = field(default_factory=lambda: np.zeros(0))  # with sensors: of q̈'s errors
+    steer_peak: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
+    steer_peak_time: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
+    singular: SingularReport | None = None
 
     @property
     def turning(self) -> list[int]:
         """Indices of the units with a turning joint."""
         return [j for j in range(len(self.units)) if np.isfinite(self.pivot_peak[:, j]).all()]
+
+    @property
+    def steered(self) -> list[int]:
+        """Indices of the units with an actuated steering."""
+        return [j for j in range(self.steer_peak.shape[1])
+                if np.isfinite(self.steer_peak[:, j]).all()]
 
     @property
     def condition_number(self) -> float:
@@ -139,7 +266,8 @@ class CheckReport:
             "limits": {"v_max": self.limits.v_max, "a_max": self.limits.a_max,
                        "w_max": self.limits.w_max, "alpha_max": self.limits.alpha_max,
                        "pivot_rate_max": self.limits.pivot_rate_max,
-                       "wheel_rate_max": self.limits.wheel_rate_max},
+                       "wheel_rate_max": self.limits.wheel_rate_max,
+                       "steer_rate_max": self.limits.steer_rate_max},
             "floor": list(self.floor),
             "peaks": {k: num(v) for k, v in self.peaks.items()},
             "ok": self.ok,
@@ -150,6 +278,10 @@ class CheckReport:
             "wheel_rate_max": {v: {a: num(self.wheel_peak[i, j])
                                    for j, a in enumerate(self.actuators)}
                                for i, v in enumerate(VARIANTS)},
+            "steer_rate_max": {v: {self.units[j]: num(self.steer_peak[i, j])
+                                   for j in self.steered}
+                               for i, v in enumerate(VARIANTS)},
+            "singular": None if self.singular is None else self.singular.to_dict(),
             "extent": {v: [float(e) for e in self.extent[i]] for i, v in enumerate(VARIANTS)},
             "friction": self.friction,
             "rank": self.rank, "parameters": len(self.names),
@@ -178,6 +310,9 @@ class CheckReport:
         if self.turning:
             rows.append(("pivot rate |δ̇| (predicted)", "rad/s", self.peaks["pivot_rate"],
                          lim.pivot_rate_max))
+        if self.steered:
+            rows.append(("steer rate |β̇| (predicted)", "rad/s", self.peaks["steer_rate"],
+                         lim.steer_rate_max))
         rows.append(("wheel rate |φ̇| (predicted)", "rad/s", self.peaks["wheel_rate"],
                      lim.wheel_rate_max))
         out.append("")
@@ -203,6 +338,18 @@ class CheckReport:
                 cells = [f"{self.pivot_peak[i, j]:>6.2f} @{self.pivot_peak_time[i, j]:>3.0f}s"
                          for j in self.turning]
                 out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
+            out.append("")
+        if self.steered:
+            out.append("max predicted steering rate per unit [rad/s] (planned steering):")
+            out.append(f"{'variant':<18}" + "".join(f"{'unit ' + self.units[j]:>12}"
+                                                    for j in self.steered))
+            for i, v in enumerate(VARIANTS):
+                cells = [f"{self.steer_peak[i, j]:>6.2f} @{self.steer_peak_time[i, j]:>3.0f}s"
+                         for j in self.steered]
+                out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
+            out.append("")
+        if self.singular is not None:
+            out += self.singular.text()
             out.append("")
         if self.actuators:
             out.append("max predicted wheel rate per motor (current channel) [rad/s]:")
@@ -333,10 +480,15 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     prate = np.abs(pred.turning)
     pivot_peak = np.where(pred.turning_units, prate.max(axis=1), np.nan)
     pivot_peak_time = np.where(pred.turning_units, fine.t[prate.argmax(axis=1)], np.nan)
-    wheel = np.abs(pred.actuator_rates)
+    srate = np.abs(pred.steering)
+    steer_peak = np.where(pred.steering_units, srate.max(axis=1), np.nan)
+    steer_peak_time = np.where(pred.steering_units, fine.t[srate.argmax(axis=1)], np.nan)
+    wheel = np.abs(pred.wheel_rates)
     peaks = {"speed": float(speed.max()), "acceleration": float(accel.max()),
              "omega": float(omega.max()), "alpha": float(alpha.max()),
-             "pivot_rate": pred.turning_peak, "wheel_rate": float(wheel.max())}
+             "pivot_rate": pred.turning_peak, "steer_rate": pred.steering_peak,
+             "wheel_rate": float(wheel.max(initial=0.0))}
+    singular = singular_report(fine.t, twists, pred, model)
     # the stacked regressor along the planned motion (unit angles as predicted)
     names = parameter_names(platform, friction)  # type: ignore[arg-type]
     true_values = truth.vector(names)
@@ -359,14 +511,17 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     return CheckReport(traj.duration, traj.n_samples, platform.name, platform.unit_names,
                        limits, floor, peaks, findings, pivot_peak, pivot_peak_time, extent,
                        names, cond, float(noise), float(log_rate), true_values, std, rel,
-                       friction, wheel.max(axis=1), list(platform.layout.current_names),
-                       sensors, s_hat, bias)
+                       friction, wheel.max(axis=1),
+                       [c for c, w in zip(platform.layout.current_names, pred.wheel_actuators,
+                                          strict=True) if w],
+                       sensors, s_hat, bias, steer_peak, steer_peak_time, singular)
 
 
 def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
                    pred: Prediction) -> list[Finding]:
     """Per variant and unit: turning rates above their limit and flagged states (the
-    swivel's pivot rate and wheel flips), and wheel rates above ``wheel_rate_max``."""
+    swivel's pivot rate and wheel flips), steering rates above ``steer_rate_max`` (units with
+    an actuated steering), and wheel rates above ``wheel_rate_max``."""
     from ropod_sysid.model.units import UNIT_TYPES
 
     out: list[Finding] = []
@@ -378,11 +533,18 @@ def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
                 rate = np.abs(pred.turning[i, :, j])
                 out += _runs(rate > limits.pivot_rate_max, t, rate,
                              f"{label} of unit {u.name} [rad/s]", limits.pivot_rate_max, name)
+            steer = getattr(UNIT_TYPES[u.type], "steering", None)
+            if steer is not None and limits.steer_rate_max is not None:
+                rate = np.abs(pred.steering[i, :, j])
+                out += _runs(rate > limits.steer_rate_max * (1 + 1e-9), t, rate,
+                             f"{steer} of unit {u.name} [rad/s]", limits.steer_rate_max, name)
             for what, mask in pred.flags.items():
                 out += _runs(mask[i, :, j], t, np.ones(t.size), f"unit {u.name} {what}", 0.0,
                              name)
         if limits.wheel_rate_max is not None:
             for k, col in enumerate(lay.current_names):
+                if not pred.wheel_actuators[k]:
+                    continue
                 rate = np.abs(pred.actuator_rates[i, :, k])
                 out += _runs(rate > limits.wheel_rate_max * (1 + 1e-9), t, rate,
                              f"wheel rate of unit {lay.units[lay.current_unit[k]]}, motor {col} "

@@ -2,14 +2,16 @@
 
 Every group of the platform predicts its own angles (:meth:`UnitType.predict_angles`: for the
 swivel the pivot ODE of thesis eq. 8a and its wheel-flip flag; for the omni wheel the integral of
-its wheel rates) and the results are placed in the platform's channel order, with the actuator
-rates at the predicted angles (each type's inverse kinematics) for the joint-rate limits. The
-trajectory code asks every group and names no joint.
+its wheel rates; for the steered wheel its planned steering) and the results are placed in the
+platform's channel order, with the actuator rates at the predicted angles (each type's inverse
+kinematics) for the joint-rate limits: the steering motors' (types with ``steering``) for the
+steering-rate limit, the others' for the wheel-rate limit. The trajectory code asks every group
+and names no joint.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,6 +30,10 @@ class Prediction:
     turning_units : (n,) True for the units whose type has a turning joint
     flags : finding (``"pulling (wheel flip)"``) → (V, N, n) bool (False for other types)
     lag : (V, N, n) quasi-steady lag (sin) of trailing units (zero for others), or None
+    steering : (V, N, n) rate of each unit's actuated steering [rad/s] (zero for units without)
+    steering_units : (n,) True for the units whose type has an actuated steering
+    wheel_actuators : (A,) True for the actuators that drive wheels (every actuator but the
+        steering motors)
     """
 
     angles: np.ndarray
@@ -37,6 +43,9 @@ class Prediction:
     turning_units: np.ndarray
     flags: dict[str, np.ndarray]
     lag: np.ndarray | None = None
+    steering: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    steering_units: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    wheel_actuators: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def turning_peak(self) -> float:
@@ -44,6 +53,19 @@ class Prediction:
         if not self.turning_units.any():
             return float("nan")
         return float(np.abs(self.turning[..., self.turning_units]).max())
+
+    @property
+    def steering_peak(self) -> float:
+        """max |steering rate| over every series, sample and steered unit (nan: none)."""
+        if not self.steering_units.any():
+            return float("nan")
+        return float(np.abs(self.steering[..., self.steering_units]).max())
+
+    @property
+    def wheel_rates(self) -> np.ndarray:
+        """(V, N, A_w) rates of the actuators that drive wheels [rad/s] (the wheel-rate
+        limit's; :attr:`wheel_actuators`)."""
+        return self.actuator_rates[..., self.wheel_actuators]
 
     @property
     def flagged(self) -> bool:
@@ -57,6 +79,17 @@ def trailing_points(platform: Platform) -> np.ndarray | None:
     from ropod_sysid.model.units import UNIT_TYPES
 
     idx = [i for i, u in enumerate(platform.units) if UNIT_TYPES[u.type].turning is not None]
+    return platform.positions[idx] if idx else None
+
+
+def steering_points(platform: Platform) -> np.ndarray | None:
+    """Attachment points (m, 2) [m] of the units with an actuated steering (the steered
+    wheels: their steering axes), whose wheel-centre velocities planning keeps from turning
+    faster than the steering-rate limit; None if none."""
+    from ropod_sysid.model.units import UNIT_TYPES
+
+    idx = [i for i, u in enumerate(platform.units)
+           if getattr(UNIT_TYPES[u.type], "steering", None) is not None]
     return platform.positions[idx] if idx else None
 
 
@@ -82,6 +115,9 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
     act = np.empty((*lead, layout.n_currents))
     turning = np.zeros((*lead, n_units))
     turning_units = np.zeros(n_units, bool)
+    steering = np.zeros((*lead, n_units))
+    steering_units = np.zeros(n_units, bool)
+    wheel_actuators = np.ones(layout.n_currents, bool)
     flags: dict[str, np.ndarray] = {}
     lag = None if twist_rates is None else np.zeros((*lead, n_units))
     for g, unit in model.groups:
@@ -96,11 +132,18 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
         if p.turning is not None:
             turning[..., g.units] = p.turning
             turning_units[g.units] = True
+        if getattr(g.type, "steering", None) is not None:
+            k = len(g.units)
+            motor = np.asarray(g.currents).reshape(k, -1)[:, g.type.steering_current]
+            steering[..., g.units] = act[..., motor]
+            steering_units[g.units] = True
+            wheel_actuators[motor] = False
         for what, mask in p.flags.items():
             flags.setdefault(what, np.zeros((*lead, n_units), bool))[..., g.units] = mask
         if lag is not None and p.lag is not None:
             lag[..., g.units] = p.lag
-    return Prediction(angles, rates, act, turning, turning_units, flags, lag)
+    return Prediction(angles, rates, act, turning, turning_units, flags, lag, steering,
+                      steering_units, wheel_actuators)
 
 
 def _variant_prediction(traj: Trajectory, model: object,

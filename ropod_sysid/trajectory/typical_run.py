@@ -5,7 +5,10 @@ loops ("lobes") through the start, sized to the floor [m] and closed exactly, ev
 a minimum-jerk blend within the limits (:mod:`ropod_sysid.trajectory.blends`). For the units
 with a turning joint (the swivel's pivot) wheel flips are planned out and the turning rates
 predicted by their type (eq. 8a) checked for all four variants; platforms without such units
-(omni wheels) skip these steps. With a wheel-rate limit the driven wheels' rates are checked too.
+(omni wheels) skip these steps. Units with an actuated steering (steered wheels) get blends slow
+enough for the steering-rate limit, and on platforms whose constraint rows lose rank in some
+manoeuvre (two steered wheels: a rotation in place, a sideways crab) that manoeuvre is left out
+or turned. With a wheel-rate limit the driven wheels' rates are checked too.
 """
 
 from __future__ import annotations
@@ -17,17 +20,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.model.assembly import SINGULAR_MARGIN
 from ropod_sysid.platform import Platform, ropod_platform
 from ropod_sysid.trajectory.blends import _path, _Plan, _sample
 from ropod_sysid.trajectory.limits import (
     DEFAULT_FLOOR,
     PIVOT_DESIGN_MARGIN,
+    STEER_RATE_MAX,
     Floor,
     Limits,
     PlanningError,
     _check_floor,
 )
-from ropod_sysid.trajectory.prediction import predict_angles, trailing_points
+from ropod_sysid.trajectory.prediction import predict_angles, steering_points, trailing_points
 from ropod_sysid.trajectory.run_variants import _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -46,6 +51,9 @@ class _Design:
     w_corner: float  # corner rate [rad/s]
     w_spin: float  # rotation rate in place [rad/s]
     pause: float  # rest in a stop-and-go [s]
+    spin: bool = True  # long runs start with a rotation in place
+    spin_offset: float = 0.0  # … about a point this far to the right of the base origin [m]
+    side: tuple[float, float] = (0.0, 1.0)  # crab lobes' short sides: direction (base frame)
 
 
 # lobe kinds of the typical run, in order: corners with a rotation in place, crab (lateral)
@@ -84,7 +92,7 @@ def _lobe(plan: _Plan, kind: str, size: tuple[float, float], design: _Design, mi
         plan.corner(sgn * math.pi / 2, design.w_corner)
         groups = [[k_x], [k_y]]
     else:
-        side = np.array([0.0, sgn * design.v_corner, 0.0])
+        side = design.v_corner * np.array([design.side[0], sgn * design.side[1], 0.0])
         plan.to(side)
         k_y = plan.hold(0.0)
         plan.to(-slow)
@@ -131,8 +139,9 @@ def _close(plan: _Plan, first: int, groups: Sequence[Sequence[int]], theta0: flo
 
 
 def _lobe_plan(kind: str, size: tuple[float, float], design: _Design, caps: Limits,
-               pivots: np.ndarray | None, mirror: bool = False) -> _Plan | None:
-    plan = _Plan(caps, pivots)
+               pivots: np.ndarray | None, mirror: bool = False,
+               steering: np.ndarray | None = None) -> _Plan | None:
+    plan = _Plan(caps, pivots, steering=steering)
     plan.level = np.array([design.v, 0.0, 0.0])
     groups = _lobe(plan, kind, size, design, mirror, first=False)
     if not _close(plan, 0, groups, 0.0, np.zeros(2), np.zeros(2)):
@@ -165,30 +174,35 @@ def _bisect(ok: Callable[[float], bool], lo: float, hi: float, steps: int = 10) 
 
 
 def _fit_lobe(kind: str, design: _Design, caps: Limits, pivots: np.ndarray | None,
-              half: tuple[float, float]) -> tuple[float, float] | None:
+              half: tuple[float, float], steering: np.ndarray | None = None
+              ) -> tuple[float, float] | None:
     """Sizes (e, c) [m] of the largest lobe of ``kind`` inside |x| ≤ W, |y| ≤ H."""
+    def fits(e: float, c: float) -> bool:
+        return _fits(_lobe_plan(kind, (e, c), design, caps, pivots, steering=steering), half)
+
     lo = None
     for e0 in np.arange(0.0, 2 * half[0], 0.25):
-        if _fits(_lobe_plan(kind, (float(e0), 0.0), design, caps, pivots), half):
+        if fits(float(e0), 0.0):
             lo = float(e0)
             break
     if lo is None:
         return None
-    e = _bisect(lambda e: _fits(_lobe_plan(kind, (e, 0.0), design, caps, pivots), half),
-                lo, 2 * half[0], steps=8)
+    e = _bisect(lambda e: fits(e, 0.0), lo, 2 * half[0], steps=8)
     assert e is not None
-    c = _bisect(lambda c: _fits(_lobe_plan(kind, (e, c), design, caps, pivots), half),
-                0.0, 2 * half[1], steps=8)
+    c = _bisect(lambda c: fits(e, c), 0.0, 2 * half[1], steps=8)
     return (e, c if c is not None else 0.0)
 
 
 def _start_spin(plan: _Plan, design: _Design) -> None:
     """Start: a whole clockwise rotation in place from rest (units set tangentially, as they
     trail a rotation), then away along +x through a tight right arc, at cruise speed; heading
-    back to 0 (mod 2π). Clockwise, so that the original run turns both ways early on."""
-    rot = np.array([0.0, 0.0, -design.w_spin])
-    arc = np.array([design.v_spin, 0.0, -design.w_spin])
-    slow = np.array([design.v_spin, 0.0, 0.0])
+    back to 0 (mod 2π). Clockwise, so that the original run turns both ways early on. With a
+    ``spin_offset`` d the rotation is about the point (0, −d) of the base frame instead (the
+    base origin on a circle of radius d) and the arc no tighter than that."""
+    w, d = design.w_spin, design.spin_offset
+    rot = np.array([w * d, 0.0, -w])
+    arc = np.array([max(design.v_spin, w * d), 0.0, -w])
+    slow = np.array([arc[0], 0.0, 0.0])
     t_rot = plan.blend_time(np.zeros(3), rot)
     t_arc = plan.blend_time(rot, arc)
     t_slow = plan.blend_time(arc, slow)
@@ -206,15 +220,16 @@ def _start_spin(plan: _Plan, design: _Design) -> None:
 
 def _typical_program(duration: float, caps: Limits, floor: Floor, pivots: np.ndarray | None,
                      design: _Design, order: Sequence[tuple[str, bool]],
-                     shrink: float) -> list[list]:
+                     shrink: float, steering: np.ndarray | None = None) -> list[list]:
     """The program of a typical run (see :func:`typical`), exactly ``duration`` long."""
     half = (shrink * min(floor[1], -floor[0]), shrink * min(floor[3], -floor[2]))
-    sizes = {kind: _fit_lobe(kind, design, caps, pivots, half) for kind in {k for k, _ in order}}
+    sizes = {kind: _fit_lobe(kind, design, caps, pivots, half, steering)
+             for kind in {k for k, _ in order}}
     if any(v is None for v in sizes.values()):
         raise PlanningError("the floor is too small for a typical run at these limits")
 
-    plan = _Plan(caps, pivots)
-    spin_start = duration >= SPIN_START_MIN
+    plan = _Plan(caps, pivots, steering=steering)
+    spin_start = duration >= SPIN_START_MIN and design.spin
     if spin_start:
         _start_spin(plan, design)
     lobe = 0
@@ -264,7 +279,8 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             w_max: float = 1.0, alpha_max: float = 1.0, floor: Sequence[float] = DEFAULT_FLOOR,
             dt: float = 0.005, seed: int = 0, pivot_rate_max: float | None = 1.5,
             platform: Platform | None = None,
-            wheel_rate_max: float | None = None) -> Trajectory:
+            wheel_rate_max: float | None = None,
+            steer_rate_max: float | None = STEER_RATE_MAX) -> Trajectory:
     """A "typical" identification run (thesis Sec. VI-A), from rest to rest.
 
     The run is a chain of loops ("lobes") through the start, each leaving and reaching it along
@@ -295,6 +311,23 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     so is the floor. A wheel rate above ``wheel_rate_max`` makes the run slower (speeds and
     rotation rates scaled down) until it holds.
 
+    Steered wheels (units with an actuated steering) are steered along their wheel-centre
+    velocities, so while they move their steering rate is the rate at which the direction of
+    that velocity turns: every blend is made long enough for it to stay within
+    ``steer_rate_max`` (at 90 %), and the planned steering is checked for all four variants
+    (a blend made longer still if it is not). At the stops (stop-and-go, start, end) a wheel
+    resumes along the line it stopped on, so no turn on the spot is planned. Where the
+    platform's constraint rows would come near losing rank (σ_r/σ_1 of their base block below
+    :data:`~ropod_sysid.model.assembly.SINGULAR_MARGIN`, where the fit leaves out the base
+    rows), a manoeuvre is changed (:func:`_regular_manoeuvres`): the start's rotation in place
+    becomes a rotation about a point beside the base origin (:data:`SPIN_OFFSETS` × the
+    largest unit distance, the first clear by twice the margin in all four variants), and the
+    crab lobes' short sides turn from sideways (90°) towards the base x axis
+    (:data:`SIDE_DIRECTIONS`) until that translation is clear of the margin. For seed 001's
+    two wheels on the x axis both are singular as planned for the ropod (all axles on one
+    line); four wheels at the corners of a rectangle are never near it. ``check`` reports the
+    time that remains.
+
     Parameters
     ----------
     duration : length of the run [s] (≥ about 10 s); the program is cut on a straight, ends with
@@ -311,13 +344,17 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     platform : unit types and geometry for the predicted angles; default the ropod
         (:func:`ropod_platform`)
     wheel_rate_max : limit of every driven wheel's rate [rad/s]; None (default): none
+    steer_rate_max : steering-rate limit of units with an actuated steering [rad/s] (default
+        :data:`~ropod_sysid.trajectory.limits.STEER_RATE_MAX`, seed 001's 195.95 °/s); None to
+        not plan for it
 
     Returns
     -------
     Trajectory
         Setpoints at ``dt`` and the planned pose.
     """
-    limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, wheel_rate_max)
+    limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, wheel_rate_max,
+                    steer_rate_max)
     floor = _check_floor(floor)
     if not (isinstance(duration, int | float) and 0 < duration <= TYPICAL_MAX_DURATION):
         raise InputError(f"duration must be a number of seconds in (0, "
@@ -327,6 +364,8 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     if platform is None:
         platform = ropod_platform()
     pivots = trailing_points(platform) if pivot_rate_max is not None else None
+    steering = steering_points(platform) if steer_rate_max is not None else None
+    spin_offset, side = _regular_manoeuvres(platform)
     rng = np.random.default_rng(seed)
     jitter = 1.0 if seed == 0 else float(rng.uniform(0.9, 1.1))
     order = list(LOBES)
@@ -335,24 +374,27 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         k = next(i for i, (kind, _) in enumerate(order) if kind == "drive")
         order = order[k:] + order[:k]  # a drive lobe first: it absorbs the start's offset
     pivot_margin = PIVOT_DESIGN_MARGIN
+    steer_margin = DESIGN_MARGIN
     shrink = 0.97
     speed = 1.0
     slower = 1.0  # speeds and rotation rates scaled down for the wheel-rate limit
     last_error = ""
     for _attempt in range(10):
-        caps = limits.scaled(DESIGN_MARGIN, pivot_margin)
+        caps = limits.scaled(DESIGN_MARGIN, pivot_margin, steer_margin)
         if slower != 1.0:
             caps = Limits(caps.v_max * slower, caps.a_max, caps.w_max * slower, caps.alpha_max,
-                          caps.pivot_rate_max)
+                          caps.pivot_rate_max, None, caps.steer_rate_max)
         vm = v_max * slower
         v = min(0.8 * jitter, 0.85) * vm * speed
         v_corner = min(0.4 * vm * jitter, 0.9 * caps.a_max / (0.9 * caps.w_max)) * speed
         design = _Design(
             v=v, v_corner=v_corner, v_spin=0.2 * vm * speed,
             w_corner=min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner),
-            w_spin=0.9 * caps.w_max, pause=1.0)
+            w_spin=0.9 * caps.w_max, pause=1.0, spin=spin_offset is not None,
+            spin_offset=spin_offset or 0.0, side=side)
         try:
-            segs = _typical_program(duration, caps, floor, pivots, design, order, shrink)
+            segs = _typical_program(duration, caps, floor, pivots, design, order, shrink,
+                                    steering)
         except PlanningError as exc:
             if "duration" in str(exc):
                 raise
@@ -370,7 +412,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             shrink *= 0.93
             last_error = "the planned run leaves the floor"
             continue
-        if pivots is not None or wheel_rate_max is not None:
+        if pivots is not None or steering is not None or wheel_rate_max is not None:
             pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]),
                                   platform)
             peak = pred.turning_peak
@@ -378,7 +420,12 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
                 pivot_margin *= 0.8
                 last_error = f"predicted pivot rate {peak:.2f} rad/s exceeds the limit"
                 continue
-            wheel = float(np.abs(pred.actuator_rates).max())
+            steer = pred.steering_peak
+            if steering is not None and steer > steer_rate_max * 0.95:  # type: ignore[operator]
+                steer_margin *= 0.8
+                last_error = f"predicted steering rate {steer:.2f} rad/s exceeds the limit"
+                continue
+            wheel = float(np.abs(pred.wheel_rates).max(initial=0.0))
             if wheel_rate_max is not None and wheel > wheel_rate_max * DESIGN_MARGIN:
                 slower *= 0.97 * DESIGN_MARGIN * wheel_rate_max / wheel
                 last_error = f"predicted wheel rate {wheel:.3g} rad/s exceeds the limit"
@@ -386,3 +433,49 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         return traj
     raise PlanningError(f"cannot plan a typical run within the limits: {last_error}; relax "
                         "the limits, enlarge the floor or use no pivot-rate limit")
+
+
+SIDE_DIRECTIONS = (90.0, 75.0, 60.0, 45.0)  # typical(): crab sides tried [°], the first clear
+# typical(): centres of the start's rotation tried, to the right of the base origin, in units of
+# the largest distance of a unit from it (0: in place), the first clear of twice the margin
+SPIN_OFFSETS = (0.0, 0.25, 0.5, 1.0)
+
+
+def _regular_manoeuvres(platform: Platform) -> tuple[float | None, tuple[float, float]]:
+    """(offset [m] of the start's rotation centre, None: no rotation at the start; crab side
+    direction (cos, sin)) for a platform: the first of :data:`SPIN_OFFSETS` whose rotation
+    (0 for a platform without constraint rows) and the first direction of
+    :data:`SIDE_DIRECTIONS` whose translation stay clear of the singular margin in all four
+    variants (90°, exactly (0, 1), if none does)."""
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS
+
+    model = PlatformModel(platform)
+    if not model.constrained:
+        return 0.0, (0.0, 1.0)
+    signs = np.array(list(VARIANT_SIGNS.values()))  # (4, 3)
+    r_max = float(np.linalg.norm(platform.positions, axis=1).max())
+    offsets = r_max * np.array(SPIN_OFFSETS)
+    spins = np.stack([offsets, np.zeros(offsets.size), -np.ones(offsets.size)], axis=-1)
+    sides = np.radians(SIDE_DIRECTIONS)
+    dirs = np.stack([np.cos(sides), np.sin(sides)], axis=-1)
+    dirs[sides == math.pi / 2] = (0.0, 1.0)
+    crabs = np.column_stack([dirs, np.zeros(sides.size)])
+    twists = np.vstack([spins, crabs])
+    ratio = _singular_ratio_at(model, (twists[None] * signs[:, None]).reshape(-1, 3))
+    worst = ratio.reshape(4, -1).min(axis=0)
+    spin_ok = worst[:offsets.size] >= 2 * SINGULAR_MARGIN
+    side_ok = worst[offsets.size:] >= SINGULAR_MARGIN
+    offset = float(offsets[int(np.argmax(spin_ok))]) if spin_ok.any() else None
+    k = int(np.argmax(side_ok)) if side_ok.any() else 0
+    return offset, (float(dirs[k, 0]), float(dirs[k, 1]))
+
+
+def _singular_ratio_at(model: object, twists: np.ndarray) -> np.ndarray:
+    """σ_r/σ_1 of the constraint rows' base block (:meth:`PlatformModel.singular_ratio`) for
+    constant base-frame twists (m, 3) at heading 0, every unit at the angles it takes for
+    that motion (:meth:`PlatformModel.initial_angles`)."""
+    angles = np.stack([model.initial_angles(tw) for tw in twists])  # type: ignore[attr-defined]
+    st = model.state(np.zeros_like(twists), twists, angles,  # type: ignore[attr-defined]
+                     np.zeros_like(angles))
+    return model.singular_ratio(st)  # type: ignore[attr-defined]

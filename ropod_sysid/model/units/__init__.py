@@ -24,7 +24,9 @@ A unit type is one module; nothing outside it names its joints. It declares (see
   kinematics; :meth:`UnitType.quasi_steady_angles`, cheap, for the excitation search): the
   trajectory planner and check ask every group and never name a joint. A type with a turning
   joint (the swivel's pivot: :attr:`UnitType.turning`) reports its rate, for the turning-rate
-  limit, and flags (the swivel's "pulling (wheel flip)");
+  limit, and flags (the swivel's "pulling (wheel flip)"); a type with an actuated steering
+  (:attr:`UnitType.steering`, the steered wheel) names its steering motor, whose rate the
+  steering-rate limit bounds instead of the wheel-rate limit;
 - the per-unit quantities the report and ``inspect`` show (:meth:`UnitType.unit_table`,
   :meth:`UnitType.quantities`).
 
@@ -153,6 +155,10 @@ class UnitType(Protocol):
     # Its units trail the velocity of their attachment point: planning keeps that velocity
     # from reversing and turning faster than the turning-rate limit.
     turning: ClassVar[str | None]
+    # the rate of the unit's actuated steering joint in words ("steering rate"), None: none.
+    # It is an actuator (``steering_current``: its index among the unit's ``currents``),
+    # limited by the steering-rate limit rather than the wheel-rate limit.
+    steering: ClassVar[str | None]
 
     n_units: int
     names: list[str]

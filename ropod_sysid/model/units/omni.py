@@ -139,6 +139,7 @@ class OmniUnits:
     }
     friction_signs = {"fov": -1, "foc": -1}  # of dissipative friction (added to the torque)
     turning = None  # fixed to the base: no turning joint, nothing to plan for
+    steering = None  # no actuated steering
 
     def __init__(self, specs: Sequence[OmniSpec], friction_tanh_gain: float = 10.0) -> None:
         self.specs = tuple(specs)

@@ -237,6 +237,8 @@ class SteeredUnits:
     }
     friction_signs = {"fdv": -1, "fdc": -1, "fsv": -1, "fsc": -1}  # of dissipative friction
     turning = None  # the steering is actuated: the unit does not trail its attachment point
+    steering = "steering rate"  # β̇, its steering motor's rate (the steering-rate limit)
+    steering_current = 1  # that motor among the unit's currents: cur_uS (no wheel)
 
     def __init__(self, specs: Sequence[SteeredSpec], friction_tanh_gain: float = 10.0) -> None:
         self.specs = tuple(specs)

@@ -232,6 +232,7 @@ class SwivelUnits:
     }
     friction_signs = {"fwv": -1, "fwc": -1, "fpv": 1, "fpc": 1}  # of dissipative friction
     turning = "pivot rate"  # δ̇: the unit trails its pivot (eq. 8a)
+    steering = None  # the pivot is passive
 
     def __init__(self, pivots: np.ndarray, wheel_radius: float, wheel_distance: float,
                  caster_offset: float, hub_com_offset: float, names: Sequence[str] | None = None,
