@@ -64,7 +64,7 @@ from ropod_sysid.trajectory import read_trajectory_csv
               help="Wheel torque limit [N m].")
 @click.option("--steer-kp", default=Controller.steer_kp, show_default=True,
               help="Steering loop derivative gain D_s [N m s/rad] (steered units: PD on the "
-                   "steering angle, seed 001 eq. 25).")
+                   "steering angle, Stöger et al. (001) eq. 25).")
 @click.option("--steer-ki", default=Controller.steer_ki, show_default=True,
               help="Steering loop proportional gain P_s on the angle [N m/rad].")
 @click.option("--steer-torque-limit", default=Controller.steer_torque_limit, show_default=True,

@@ -50,7 +50,7 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--steer-rate-max", default=STEER_RATE_MAX, show_default=True,
                      type=positive("rad/s"),
                      help="Steering rate limit |β̇| [rad/s] of units with an actuated steering "
-                          "(steered; default 195.95 °/s, seed 001's vehicle)."),
+                          "(steered; default 195.95 °/s, Stöger et al. (001)'s vehicle)."),
         click.option("--wheel-rate-max", default=None, type=positive("rad/s"),
                      help="Rate limit |φ̇| of every driven wheel [rad/s] (any unit type; not "
                           "the steering motors) [default: none]."),

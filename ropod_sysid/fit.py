@@ -22,7 +22,7 @@ from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.units import FRICTION_VARIANTS
-from ropod_sysid.noise import counts_note, detect_encoder_counts, require_base_rows
+from ropod_sysid.noise import counts_note, detect_encoder_counts
 from ropod_sysid.params import (
     DISSIPATIVE_SIGN,
     UNITS_OF,
@@ -410,11 +410,16 @@ Robust = Literal["none", "huber", "bisquare"]
 ROBUST_METHODS: tuple[str, ...] = ("none", "huber", "bisquare")
 
 
+CORRECTION_MARGIN = 10.0  # --encoder-counts corrects the directions with AᵀA > this × E[δAᵀδA]
+
+
 def corrected_triangle(systems: Sequence[Triangles], weights: Sequence[float]) -> np.ndarray:
     """The stacked triangle of the weighted systems; when they carry the encoders' error gram
     (``--encoder-counts``), of the normal equations corrected for it (corrected least squares:
     AᵀA − E[δAᵀδA], Aᵀb unchanged; errors of A shrink a plain fit's values,
-    :mod:`ropod_sysid.noise`), refactored by :func:`gram_triangle`."""
+    :mod:`ropod_sysid.noise`), refactored by :func:`gram_triangle`. E is applied in the
+    eigen-directions of the column-scaled AᵀA that exceed :data:`CORRECTION_MARGIN` × E's
+    share in them, not in those the logs barely determine."""
     r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
     grams = [s.weighted_error_gram(w) for s, w in zip(systems, weights, strict=True)]
     if not grams or any(g is None for g in grams):
@@ -428,7 +433,13 @@ def corrected_triangle(systems: Sequence[Triangles], weights: Sequence[float]) -
         return int(np.count_nonzero(lam > RCOND**2 * lam.max()))
 
     before = rank(gram)
-    gram[:p, :p] -= sum(grams)  # type: ignore[arg-type]
+    err = sum(grams) / np.outer(d, d)  # type: ignore[operator]
+    # only where the data determine a direction well above the encoders' error in it: in a
+    # direction the motion barely excites (a symmetric layout's friction difference) E would
+    # outweigh AᵀA and the corrected equations would lose it
+    lam, vec = np.linalg.eigh(gram[:p, :p] / np.outer(d, d))
+    keep = vec[:, lam > CORRECTION_MARGIN * np.einsum("ik,ij,jk->k", vec, err, vec)]
+    gram[:p, :p] -= (keep @ keep.T @ err @ keep @ keep.T) * np.outer(d, d)
     if rank(gram) < before:
         raise InputError("--encoder-counts: the correction for the encoders' errors is larger "
                          "than the motion in the logs can carry (the corrected normal equations "
@@ -674,8 +685,6 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     model = PlatformModel(platform)
     names = model.parameter_names(options.friction)
     check_fixed(options.fix, names)  # before the logs are read
-    if options.encoder_counts:
-        require_base_rows(model, "--encoder-counts")
     delay = 0.0
     if options.input_delay == "auto":
         reduced, delay = _delay_search(reduce, names, options)

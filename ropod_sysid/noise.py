@@ -158,40 +158,46 @@ def velocity_kernel(k: int, dt: float) -> np.ndarray:
 
 
 def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np.ndarray:
-    """Covariance (N, 3, 3) [1/s⁴ · m², …] of the world-frame q̈ of the equation rows from
-    encoder quantisation: R(θ) G Gᵀ R(θ)ᵀ σ_φ² ‖g_q‖² (module docstring; zero with exact
-    encoders)."""
+    """Covariance (N, D, D) [1/s⁴ · m², …] of the world-frame q̈ of the equation rows from
+    encoder quantisation: M Mᵀ σ_φ² ‖g_q‖² with M = [R(θ) G; E] (D, J), G the odometry gain
+    and E the selection of the units' own coordinates (a steered wheel's β̈ is its angle's
+    second difference; module docstring; zero with exact encoders)."""
     th = st.q[:, 2]  # type: ignore[attr-defined]
+    n_dof = int(getattr(model, "n_dof", 3))
     if noise.encoder_counts is None:
-        return np.zeros((th.size, 3, 3))
+        return np.zeros((th.size, n_dof, n_dof))
     power = float(np.sum(row_kernel(noise.grid, acceleration_kernel(noise.k, noise.dt)) ** 2))
     g = odometry_gain(model, st.angles)  # type: ignore[attr-defined]  # (N, 3, J)
-    # an angle that moves less than a count per sample steps rarely: its error is a slow
-    # staircase, not white; its share of the white error's power is about the counts per sample
-    step = 2.0 * math.pi / int(noise.encoder_counts)
-    counts = np.abs(st.angle_rate) * noise.dt / step  # type: ignore[attr-defined]  # (N, J)
-    g = g * np.sqrt(np.minimum(counts, 1.0))[:, None, :]
     c, s = np.cos(th), np.sin(th)
     rot = np.zeros((th.size, 3, 3))
     rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
     rot[:, 2, 2] = 1.0
-    rg = rot @ g
-    return rg @ np.swapaxes(rg, 1, 2) * encoder_variance(int(noise.encoder_counts)) * power
+    m = np.zeros((th.size, n_dof, g.shape[2]))
+    m[:, :3] = rot @ g
+    own = np.asarray(getattr(model, "coordinate_channels", np.zeros(0, int)), int)
+    m[:, 3 + np.arange(own.size), own] = 1.0
+    # an angle that moves less than a count per sample steps rarely: its error is a slow
+    # staircase, not white; its share of the white error's power is about the counts per sample
+    step = 2.0 * math.pi / int(noise.encoder_counts)
+    counts = np.abs(st.angle_rate) * noise.dt / step  # type: ignore[attr-defined]  # (N, J)
+    m = m * np.sqrt(np.minimum(counts, 1.0))[:, None, :]
+    return m @ np.swapaxes(m, 1, 2) * encoder_variance(int(noise.encoder_counts)) * power
 
 
 def regressor_error_gram(model: object, st: object, noise: SensorNoise,
                          friction: str = "per-wheel", groups: int | None = None,
                          qdd: np.ndarray | None = None) -> np.ndarray:
-    """E[δA_dᵀ δA_d] (3, p, p) summed over the rows at ``st``, per DOF d: the errors of A_ID,ext
+    """E[δA_dᵀ δA_d] (D, p, p) summed over the rows at ``st``, per row d: the errors of A_ID,ext
     from the errors of q̈ (A is linear in q̈: A = A₀ + Σ_k A_k q̈_k), which bias a least-squares
     fit towards smaller values (errors in the variables): E[m̂ − m] ≈ −(ÃᵀÃ)⁻¹ E[δÃᵀδÃ] m.
     Through the swivel's caster offset the pivots' acceleration δ̈ carries q̈ / d, so the
     unit-inertia columns carry q̈'s errors a hundredfold. ``groups``: the rows are that many
-    runs of equal length one after the other; returns (groups, 3, p, p), a sum per run."""
+    runs of equal length one after the other; returns (groups, D, p, p), a sum per run."""
     n = st.q.shape[0]  # type: ignore[attr-defined]
-    zero = model.a_id_ext(st, np.zeros((n, 3)), friction)  # type: ignore[attr-defined]
-    a_k = np.stack([model.a_id_ext(st, np.broadcast_to(np.eye(3)[k], (n, 3)),  # type: ignore[attr-defined]
-                                   friction) - zero for k in range(3)], axis=1)  # (N, 3k, 3d, p)
+    d = int(getattr(model, "n_dof", 3))
+    zero = model.a_id_ext(st, np.zeros((n, d)), friction)  # type: ignore[attr-defined]
+    a_k = np.stack([model.a_id_ext(st, np.broadcast_to(np.eye(d)[k], (n, d)),  # type: ignore[attr-defined]
+                                   friction) - zero for k in range(d)], axis=1)  # (N, Dk, Dd, p)
     out = error_gram(a_k, acceleration_covariance(model, st, noise), groups)
     if qdd is not None and noise.encoder_counts is not None:
         # and the errors of the measured angle rates the unit types use (the swivel's δ̇):
@@ -205,11 +211,11 @@ def regressor_error_gram(model: object, st: object, noise: SensorNoise,
         for j in measured_rate_channels(model, st, qdd, friction):
             moved = rates.copy()
             moved[:, j] += h
-            d = (model.a_id_ext(model.state(st.q, st.qd, st.angles, moved), qdd, friction)  # type: ignore[attr-defined]
-                 - base) / h
-            cov = np.zeros((n, 3, 3))
+            da = (model.a_id_ext(model.state(st.q, st.qd, st.angles, moved), qdd, friction)  # type: ignore[attr-defined]
+                  - base) / h
+            cov = np.zeros((n, 1, 1))
             cov[:, 0, 0] = var[:, j]
-            out = out + error_gram(np.stack([d, 0 * d, 0 * d], axis=1), cov, groups)
+            out = out + error_gram(da[:, None], cov, groups)
     return out
 
 
@@ -231,15 +237,15 @@ def measured_rate_channels(model: object, st: object, qdd: np.ndarray,
 
 
 def error_gram(a_k: np.ndarray, cov: np.ndarray, groups: int | None = None) -> np.ndarray:
-    """Σ over rows of A_kᵀ cov_kl A_l per DOF: (3, p, p), or (groups, 3, p, p) for rows that
-    are ``groups`` runs one after the other; ``a_k`` (N, 3, 3, p): ∂A/∂q̈_k, ``cov`` (N, 3, 3)
-    (:func:`regressor_error_gram`)."""
+    """Σ over rows of A_kᵀ cov_kl A_l per row d: (D, p, p), or (groups, D, p, p) for rows that
+    are ``groups`` runs one after the other; ``a_k`` (N, K, D, p): ∂A/∂x_k of K error sources,
+    ``cov`` (N, K, K) their covariance (:func:`regressor_error_gram`)."""
     t = np.einsum("nkl,nkdp->nldp", cov, a_k)  # Σ_k cov_kl A_k
     g = 1 if groups is None else groups
-    p = a_k.shape[-1]
-    # Σ_{n,l} A_l[d]ᵀ t_l[d] by one batched product per run and DOF (BLAS, not einsum)
-    x = np.moveaxis(a_k.reshape(g, -1, 3, p), 2, 1)  # (g, 3d, n·l, p)
-    y = np.moveaxis(t.reshape(g, -1, 3, p), 2, 1)
+    d, p = a_k.shape[2], a_k.shape[-1]
+    # Σ_{n,l} A_l[d]ᵀ t_l[d] by one batched product per run and row (BLAS, not einsum)
+    x = np.moveaxis(a_k.reshape(g, -1, d, p), 2, 1)  # (g, d, n·l, p)
+    y = np.moveaxis(t.reshape(g, -1, d, p), 2, 1)
     out = np.swapaxes(x, -1, -2) @ y
     return out[0] if groups is None else out
 
@@ -354,7 +360,17 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
                         row_step=pre.grid.step)  # type: ignore[attr-defined]
-    return regressor_error_gram(model, st, noise, friction, qdd=rows.qdd)
+    per_dof = regressor_error_gram(model, st, noise, friction, qdd=rows.qdd)
+    return kind_grams(per_dof)
+
+
+def kind_grams(per_dof: np.ndarray) -> np.ndarray:
+    """Error grams (…, D, p, p) per row summed into the fit's three row kinds (…, 3, p, p):
+    x, y, and θ with the units' own coordinates (:func:`ropod_sysid.solve.row_kinds`)."""
+    from ropod_sysid.solve import row_kinds
+
+    kinds = row_kinds(per_dof.shape[-3])
+    return np.stack([per_dof[..., kinds == k, :, :].sum(axis=-3) for k in range(3)], axis=-3)
 
 
 def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None) -> int | None:

@@ -3,7 +3,7 @@
 Per sample interval, the base displacement that best explains the increments of every unit's
 angles is found by least squares on the units' no-slip constraint rows, linear in the
 base-frame twist (v_x, v_y, ω): each unit type gives its rows (for the swivel eqs. 8a and 11,
-for the omni wheel the rim-speed row of seed 004 eq. 2), and the rows of all units, of any mix of
+for the omni wheel the rim-speed row of 004 eq. 2), and the rows of all units, of any mix of
 types, form one least-squares problem per interval, solved by its 3 × 3 normal equations. The
 increments are integrated with the mid-interval heading; the pose is zero at the first sample.
 """

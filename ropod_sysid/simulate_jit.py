@@ -7,7 +7,7 @@ arrays). The groups of a platform are passed as flat arrays with offsets (a kern
 so one compiled loop serves every list of groups; the kernels are dispatched by id
 (:data:`KERNELS`). Per RK4 stage it sums the base's M_b (eq. 2) and every group's M_add, b_dir,
 B_τ, friction torques τ_f and generalized friction force f_f into eq. 65 and solves eq. 33;
-body-axis friction (seed 004 eqs. 6–8) and the external force B_Fb F_b (eq. 3) are added on the
+body-axis friction (004 eqs. 6–8) and the external force B_Fb F_b (eq. 3) are added on the
 base. The controller (PI per actuator, anti-windup, torque limit), the setpoints on the step
 grid, the recording every ``stride`` steps and the kinetic energy are the same as the numpy
 path's, which stays the reference (results equal to round-off, ``tests/test_simulate_jit.py``).

@@ -1,6 +1,6 @@
 """A base pose from an external tracker slower than the log, used next to wheel odometry.
 
-An overhead camera (seed 004 tracks the 5DPO robot at 25 fps, about 1 cm and 3°) gives the pose
+An overhead camera (004 tracks the 5DPO robot at 25 fps, about 1 cm and 3°) gives the pose
 at its own frames; the rows of the log between them leave ``x_b, y_b, theta_b`` empty (NaN in
 :attr:`ropod_sysid.io.log.Log.pose`). Twice-differentiated, such a pose is useless for the
 equations of motion: 1 cm of noise at 25 fps is an acceleration noise of the order of

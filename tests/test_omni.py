@@ -1,4 +1,4 @@
-"""The omni-wheel unit type (seed 004, 5DPO): closed forms and independent re-derivations.
+"""The omni-wheel unit type (004, 5DPO): closed forms and independent re-derivations.
 
 Each check derives the quantity a second way (the paper's matrices written out by hand, finite
 differences of wheel-centre positions, Kane's method with numerical partial velocities, the

@@ -271,7 +271,7 @@ def test_cli_optimize_and_check_a_mixed_platform(tmp_path, mixed):
 # --------------------------------------------------------------------------- steered wheels
 
 STEERED = ROOT / "datasets" / "steered" / "platform.yaml"
-# four steered wheels at the corners of a 0.6 m × 0.4 m rectangle (built like seed 001's units)
+# four steered wheels at the corners of a 0.6 m × 0.4 m rectangle (built like 001's units)
 FOUR_STEERED = {"name": "four-steered", "wheel_radius": 0.1, "torque_constant": 2.0,
                 "steer_torque_constant": 10.0, "friction_tanh_gain": 100.0,
                 "units": [{"name": str(k + 1), "type": "steered", "position": p}
@@ -378,7 +378,7 @@ def test_singular_report_through_and_clear_of_a_singular_configuration(two_steer
 
 
 def test_typical_steers_clear_of_singular_configurations(two_steered, four_steered):
-    """Seed 001's two wheels are singular in a rotation in place and a sideways crab: the
+    """001's two wheels are singular in a rotation in place and a sideways crab: the
     typical run rotates about a point 0.075 m beside the origin and crabs at 60°, and is near
     singular for less than 2 % of its moving time; four wheels at the corners never are."""
     from ropod_sysid.trajectory import run_singular_report

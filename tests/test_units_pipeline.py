@@ -1,5 +1,5 @@
 """Every unit type through the one pipeline: simulate → log file → fit, for omni-wheeled robots
-(seed 004's 5DPO, a three-wheeled one), body-axis friction, and a platform mixing smart wheels
+(004's 5DPO, a three-wheeled one), body-axis friction, and a platform mixing smart wheels
 and omni wheels.
 
 The simulator holds each control step's torque over the step (zero-order hold) and logs it at
@@ -190,7 +190,7 @@ def test_mixed_platform_is_identified() -> None:
 
 # ------------------------------------------------------------------ a slow overhead tracker
 def tracker_pose(r, rate: float, fps: float = 25.0, seed: int = 5) -> np.ndarray:
-    """The pose a 25 fps tracker with 1 cm and 3° noise (seed 004's) gives, NaN between
+    """The pose a 25 fps tracker with 1 cm and 3° noise (004's) gives, NaN between
     frames, in the log's frame (zero at the start)."""
     rng = np.random.default_rng(seed)
     pose = np.full((r.log.n_samples, 3), np.nan)

@@ -1,5 +1,5 @@
 """Remake the shipped omni-wheel sample: four variants of a 60 s typical run of the 5DPO robot
-(seed 004: four omni wheels at 90°, d = 0.089 m, r = 0.0325 m, M = 2.34 kg), simulated.
+(004: four omni wheels at 90°, d = 0.089 m, r = 0.0325 m, M = 2.34 kg), simulated.
 
     python datasets/omni/make_dataset.py
 

@@ -1,4 +1,4 @@
-"""Remake the shipped steered-wheel sample: four variants of a 30 s typical run of seed 001's
+"""Remake the shipped steered-wheel sample: four variants of a 30 s typical run of 001's
 test vehicle (two centred steered wheels mounted diametrically, r = 0.1 m), simulated.
 
     python datasets/steered/make_dataset.py

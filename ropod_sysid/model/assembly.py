@@ -17,7 +17,7 @@ velocity that it does not eliminate (the steered wheel's lateral no-slip rows G 
 generalized coordinates are then q = (q_b, s): D = 3 + E rows, the base's three first, then the
 groups' own coordinates in platform order; q̈ (N, D), M_dir (N, D, D), B_τ (N, D, A). The
 constraint forces Gᵀλ are removed by the orthogonal projector P = I − G⁺G onto the null space
-of G (seed 001 eqs. 11–15; :func:`null_projector`): P Gᵀ = 0, and P (M q̈ − B_τ(τ + τ_f) − b) = 0
+of G (001 eqs. 11–15; :func:`null_projector`): P Gᵀ = 0, and P (M q̈ − B_τ(τ + τ_f) − b) = 0
 are the equations of motion and, linear in the parameters, the identification rows
 P A_ID,ext m = P b_ID. P is found by an SVD with a rank tolerance, so a configuration in which
 the constraints lose rank (001 Property 3–4: all wheel axles on one line) gives the right

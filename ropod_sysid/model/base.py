@@ -44,8 +44,8 @@ def kinetic_energy_base(mass: float, inertia: float, qd: np.ndarray) -> np.ndarr
     return 0.5 * mass * (qd[:, 0] ** 2 + qd[:, 1] ** 2) + 0.5 * inertia * qd[:, 2] ** 2
 
 
-# ------------------------------------------------------------ body-axis friction (seed 004)
-# Friction of the base along its own axes, as seed 004 eqs. 6–8 model the 5DPO robot: viscous
+# ------------------------------------------------------------ body-axis friction (004)
+# Friction of the base along its own axes, as 004 eqs. 6–8 model the 5DPO robot: viscous
 # f_bv and Coulomb f_bc along x, y of the base frame and about z. It replaces the units'
 # friction terms (``--friction body``); added like them, so dissipative values are negative.
 BASE_PARAMETERS = ("m_b", "Jzz_b")

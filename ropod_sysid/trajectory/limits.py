@@ -5,7 +5,7 @@ world acceleration of the base origin, centripetal part included), |ω| ≤ ω_m
 |ω̇| ≤ α_max [rad/s²], |δ̇_i| ≤ pivot_rate_max [rad/s] for units with a turning joint (the
 swivel's pivot; the disturbance observer ignores the data above 1.5 rad/s, Sec. VII-C),
 |β̇_i| ≤ steer_rate_max [rad/s] for units with an actuated steering (the steered wheel's steering
-motor; seed 001's vehicle: 195.95 °/s) and, optionally, |φ̇| ≤ wheel_rate_max [rad/s] for every
+motor; 001's vehicle: 195.95 °/s) and, optionally, |φ̇| ≤ wheel_rate_max [rad/s] for every
 other actuated joint (the units' ``actuator_rates``, e.g. a motor's top speed). The floor is the
 rectangle (x_min, x_max, y_min, y_max) [m] the base origin must stay in, in the world frame of
 the planned pose (start at the origin). A run that cannot be planned within them raises
@@ -24,7 +24,7 @@ Floor = tuple[float, float, float, float]
 DEFAULT_FLOOR: Floor = (-3.0, 3.0, -2.0, 2.0)
 # typical(), optimize(): the pivot rate (quasi-steady) is planned at 80 % of its limit
 PIVOT_DESIGN_MARGIN = 0.8
-STEER_RATE_MAX = 3.42  # default steering-rate limit [rad/s]: seed 001's 195.95 °/s
+STEER_RATE_MAX = 3.42  # default steering-rate limit [rad/s]: 001's 195.95 °/s
 
 
 @dataclass(frozen=True)

@@ -323,7 +323,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     becomes a rotation about a point beside the base origin (:data:`SPIN_OFFSETS` × the
     largest unit distance, the first clear by twice the margin in all four variants), and the
     crab lobes' short sides turn from sideways (90°) towards the base x axis
-    (:data:`SIDE_DIRECTIONS`) until that translation is clear of the margin. For seed 001's
+    (:data:`SIDE_DIRECTIONS`) until that translation is clear of the margin. For 001's
     two wheels on the x axis both are singular as planned for the ropod (all axles on one
     line); four wheels at the corners of a rectangle are never near it. ``check`` reports the
     time that remains.
@@ -345,7 +345,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         (:func:`ropod_platform`)
     wheel_rate_max : limit of every driven wheel's rate [rad/s]; None (default): none
     steer_rate_max : steering-rate limit of units with an actuated steering [rad/s] (default
-        :data:`~ropod_sysid.trajectory.limits.STEER_RATE_MAX`, seed 001's 195.95 °/s); None to
+        :data:`~ropod_sysid.trajectory.limits.STEER_RATE_MAX`, 001's 195.95 °/s); None to
         not plan for it
 
     Returns

@@ -1,7 +1,8 @@
 """The omni-wheel unit: one driven wheel with free rollers, fixed to the base (no pivot).
 
-Seed 004 (the 5DPO robot): kinematics 004 eqs. 1–5, dynamics 004 eqs. 6–13. Everything is
-vectorised over samples N and the k units of the group: arrays are (N, k, …).
+Conceição, Moreira and Costa's model of the 5DPO robot (cited as 004): kinematics 004 eqs. 1–5,
+dynamics 004 eqs. 6–13. Everything is vectorised over samples N and the k units of the group:
+arrays are (N, k, …).
 
 Geometry. Unit i sits at p_i (base frame) with heading h_i = (cos a_i, sin a_i): the direction in
 the base frame in which the wheel centre moves when the wheel turns with φ̇_i > 0 and rolls
@@ -124,7 +125,7 @@ class OmniData:
 
 
 class OmniUnits:
-    """k omni wheels of seed 004, fixed to the base: the ``omni`` unit type."""
+    """k omni wheels of 004, fixed to the base: the ``omni`` unit type."""
 
     type_name = "omni"
     angles = (Channel("phi_{u}", "phi", "rad", "wheel encoder angle, unwrapped"),)

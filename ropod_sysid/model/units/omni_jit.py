@@ -1,7 +1,7 @@
 """The compiled (numba) kernel of k omni units at one sample: the simulator's fast path.
 
 The same pieces as :meth:`OmniUnits.kinematics`, :meth:`OmniUnits.mass_terms`, the per-wheel
-friction and :meth:`OmniUnits.kinetic_energy` (seed 004 eqs. 1–13; eqs. O1–O3 of
+friction and :meth:`OmniUnits.kinetic_energy` (004 eqs. 1–13; eqs. O1–O3 of
 :mod:`ropod_sysid.model.units.omni`), written out per unit with scalars. The numpy methods stay
 the reference (``tests/test_simulate_jit.py`` compares the two).
 

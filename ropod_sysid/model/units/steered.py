@@ -1,10 +1,11 @@
 """The centred steered wheel: a driven wheel on an actuated steering axis through its centre.
 
-Seed 001 (Stöger, Müller, Gattringer): n centred orientable wheels, each with a drive and a
-steering motor and no caster offset. The printed copy of 001 lost its minus signs; every formula
-here is derived again below and checked by ``tests/test_steered.py`` (a hand derivation, Kane's
-method with finite-difference Jacobians, energy). Everything is vectorised over samples N and
-the k units of the group: arrays are (N, k, …).
+Stöger, Müller and Gattringer, *Dynamic model-based control of redundantly actuated, non-
+holonomic, omnidirectional vehicles* (JKU Linz; cited as 001): n centred orientable wheels,
+each with a drive and a steering motor and no caster offset. The printed copy of 001 lost its
+minus signs; every formula here is derived again below and checked by ``tests/test_steered.py``
+(a hand derivation, Kane's method with finite-difference Jacobians, energy). Everything is
+vectorised over samples N and the k units of the group: arrays are (N, k, …).
 
 Geometry. Unit i has its steering axis at p_i (base frame), steering angle β_i (w.r.t. the
 base x axis) and wheel radius r. With ψ_i = θ + β_i the wheel's world heading,
@@ -214,7 +215,7 @@ class SteeredData:
 
 
 class SteeredUnits:
-    """k centred steered wheels of seed 001: the ``steered`` unit type."""
+    """k centred steered wheels of 001: the ``steered`` unit type."""
 
     type_name = "steered"
     angles = (Channel("steer_{u}", "steer", "rad", "steering angle w.r.t. the base x axis",
