@@ -16,7 +16,6 @@ from ropod_sysid.cli.common import (
 )
 from ropod_sysid.control import KD, KI, ModelControl
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import parameters_of
 from ropod_sysid.io import LOG_SUFFIXES, write_log
 from ropod_sysid.io.csvlog import read_numeric_table
 from ropod_sysid.io.paramfile import read_parameters, read_truth_parameters
@@ -62,6 +61,8 @@ def check_control(control: str) -> None:
 def control_parameters(path: str, platform: Platform) -> DynamicParameters:
     """The controller's parameters from ``path`` for ``platform``: one-line errors naming the
     file for another platform's file, unknown, missing or non-finite parameters."""
+    from ropod_sysid.fit import parameters_of  # (imports the fit's machinery: only here)
+
     pfile = read_parameters(path, platform)  # a fit's file, or a flat truth.json
     _, values = parameters_of(pfile, platform, path)
     params = DynamicParameters.from_mapping(values, platform, path)
@@ -172,11 +173,15 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     if force_path is not None:
         fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])
         force = ForceSchedule(fc["t"], np.column_stack([fc["F_bx"], fc["F_by"], fc["T_bz"]]))
-    (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt, controller=controller,
-                         sensors=sensors, force=force,
-                         initial="auto" if initial_angles == "auto" else None, quiet=quiet,
-                         source=out_path, engine=engine, control=model_control)
-    if not np.all(np.isfinite(result.q)):
+    try:
+        (result,) = simulate(platform, params, setpoints, rate=rate, dt=dt,
+                             controller=controller, sensors=sensors, force=force,
+                             initial="auto" if initial_angles == "auto" else None, quiet=quiet,
+                             source=out_path, engine=engine, control=model_control)
+        finite = bool(np.all(np.isfinite(result.q)))
+    except np.linalg.LinAlgError:  # an SVD or solve of the constrained model on inf/NaN
+        finite = False
+    if not finite:
         raise InputError(f"{traj_path}: the simulation diverged; lower the setpoints or raise "
                          "--torque-limit")
     write_log(result.log, out_path, platform)

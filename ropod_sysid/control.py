@@ -37,11 +37,13 @@ Desired motion. q̇_d = (R(θ) ν_d, ṡ_d): the base twist setpoint ν_d (base 
 the world frame at the measured heading θ, and the planned rates of the units' own coordinates
 (the steering angles of :meth:`PlatformModel.plans`, which the decentralised steering loops
 track too); q̈_d = (R(θ)(ν̇_d + ω_d S ν_d), ω̇_d, s̈_d), S the 90° turn, ν̇_d the setpoints'
-rate. s̈_d is the plan's rate differenced once more on the integration grid (central
-differences): the plan is a smooth step while a wheel stands still and follows the
-wheel-centre velocity (an arctangent of linearly interpolated setpoints) otherwise, whose
-second derivative holds the setpoints' kinks; differencing carries them as short pulses of
-the right area rather than leaving them out.
+rate. s̈_d is the plan's rate differenced once more, by central differences over ± the
+setpoints' own sample interval: the plan is a smooth step while a wheel stands still and
+follows the wheel-centre velocity (an arctangent of linearly interpolated setpoints)
+otherwise, whose rate has a kink at every setpoint sample; the wide difference carries each
+as a pulse of the right area spread over the interval (over one 1 ms step it would be a pulse
+that saturates the steering motors), rather than leaving it out as an analytic derivative
+between the samples would.
 
 Integral. ε_p starts at the error of the own coordinates, whose planned angles are known
 (s_d(0) − s(0); the base has no desired pose, only a velocity): for the steered wheels,
@@ -104,11 +106,16 @@ class DesiredMotion:
 
 def desired_motion(model: PlatformModel, t: np.ndarray, twist: np.ndarray,
                    twist_rate: np.ndarray,
-                   plans: list[tuple[np.ndarray, ...] | None] | None = None) -> DesiredMotion:
+                   plans: list[tuple[np.ndarray, ...] | None] | None = None,
+                   window: float = 0.0) -> DesiredMotion:
     """The desired motion along base-frame twist setpoints (T, R, 3) and their rates at the
     step times t (T,) (uniform): the units' own coordinates from ``plans``
     (:meth:`PlatformModel.plans`, computed here when not given), their accelerations by central
-    differences of the planned rates."""
+    differences of the planned rates over ± ``window`` [s] (at least one step; one-sided at
+    the ends). The plan follows linearly interpolated setpoints, so its rate has a kink at
+    every setpoint sample: differenced over one integration step each would become a pulse of
+    height ∝ 1/dt (saturating a steering motor at 1 ms); over ± the setpoints' own sample
+    interval it is spread over that interval, with the same area."""
     n_t, n_r = twist.shape[:2]
     n_e = model.n_dof - 3
     coord = np.zeros((n_t, n_r, n_e))
@@ -124,7 +131,13 @@ def desired_motion(model: PlatformModel, t: np.ndarray, twist: np.ndarray,
                                  "coordinates of its own but no planned motion; the "
                                  "model-based law needs one (use --control pid)")
             coord[:, :, own], rate[:, :, own] = plan[0], plan[1]
-    acc = (np.gradient(rate, t, axis=0) if n_t > 1 else np.zeros_like(rate))
+    acc = np.zeros_like(rate)
+    if n_t > 1 and n_e:
+        step = float(t[1] - t[0])
+        m = max(1, int(round(window / step)))
+        k = np.arange(n_t)
+        hi, lo = np.minimum(k + m, n_t - 1), np.maximum(k - m, 0)
+        acc = (rate[hi] - rate[lo]) / ((hi - lo) * step)[:, None, None]
     return DesiredMotion(twist, twist_rate, coord, rate, acc)
 
 

@@ -289,7 +289,10 @@ def simulate(platform: Platform, params: DynamicParameters,
             if control is not None:
                 _, angle_err = model.setpoints(q, sp_all[0], sp_rate[0], angles, plans, 0)
                 law = ModelLaw(model, control, controller.gains(~np.isnan(angle_err[0]))[2])
-                desired = desired_motion(model, grid[:, 0] - t0[0], sp_all, sp_rate, plans)
+                spacing = max(float(np.median(np.diff(r.t))) if r.t.size > 1 else 0.0
+                              for r in runs)  # the setpoints' sample interval
+                desired = desired_motion(model, grid[:, 0] - t0[0], sp_all, sp_rate, plans,
+                                         window=spacing)
                 integ = law.initial_integral(angles, desired)  # ε_p (R, D)
             for step in range(steps + 1):
                 # controller (zero-order hold over the step)
