@@ -20,11 +20,12 @@ acceleration of the allowed motions and the bracket of (26) is the inverse dynam
     q̈_c = q̈_d + P_N (k_d ε_v + k_i ε_p):                                              (26')
 
 u = :meth:`~ropod_sysid.model.PlatformModel.inverse_dynamics` (q̈_c) with W = diag(1/τ_max²).
-With an exact model the error of every allowed motion obeys ë + k_d ė + k_i e = 0 (001's
-closed loop (30) with M̃ factored out): k_d [1/s] and k_i [1/s²] are the same for every platform
-and every kind of row (translations, rotation, steering angles), the model's inertias giving
-the forces [N], torques [N m] their units. Defaults k_d = 40 1/s, k_i = 400 1/s²: a double
-pole at 20 rad/s (critically damped, time constant 50 ms), well inside a 1 kHz control rate.
+With an exact model (and the allowed motions held fixed) the error of every allowed motion
+obeys ë + k_d ė + k_i e = 0 (001's closed loop (30) with M̃ factored out): k_d [1/s] and
+k_i [1/s²] are the same for every platform and every kind of row (translations, rotation,
+steering angles), the model's inertias giving the forces [N], torques [N m] their units.
+Defaults k_d = 40 1/s, k_i = 400 1/s²: a double pole at 20 rad/s (critically damped, time
+constant 50 ms), well inside a 1 kHz control rate.
 
 Model terms. M, the velocity products and friction are the controller's model (its parameters
 may differ from the plant's), evaluated at the measured pose and velocity as in 001. Our models
@@ -40,16 +41,22 @@ track too); q̈_d = (R(θ)(ν̇_d + ω_d S ν_d), ω̇_d, s̈_d), S the 90° tur
 rate. s̈_d is the plan's rate differenced once more, by central differences over ± the
 setpoints' own sample interval: the plan is a smooth step while a wheel stands still and
 follows the wheel-centre velocity (an arctangent of linearly interpolated setpoints)
-otherwise, whose rate has a kink at every setpoint sample; the wide difference carries each
+otherwise, whose rate jumps at every setpoint sample; the wide difference carries each jump
 as a pulse of the right area spread over the interval (over one 1 ms step it would be a pulse
 that saturates the steering motors), rather than leaving it out as an analytic derivative
 between the samples would.
 
-Integral. ε_p starts at the error of the own coordinates, whose planned angles are known
-(s_d(0) − s(0); the base has no desired pose, only a velocity): for the steered wheels,
-whose constraints do not involve β̇, ε_p's steering rows are then the angle error β_d − β of
-001's steering PD loops (eq. 25). A run whose torques the limits clip does not integrate
-(anti-windup, as the PI loops of :class:`ropod_sysid.simulate.Controller`).
+Integral. The base rows of ε_p are integrated (from zero: the base has no desired pose, only
+a velocity); a run whose torques the limits clip does not integrate them (anti-windup, as the
+PI loops of :class:`ropod_sysid.simulate.Controller`). The own coordinates' planned values are
+known, and the rows of P_N that belong to them are identity rows as long as no constraint
+involves their rates (the steered wheels' do not involve β̇; a unit type whose constraints did
+would need the integral): their integral ∫(ṡ_d − ṡ) dτ, started at the error s_d(0) − s(0),
+is the error s_d − s itself, which the law takes directly — without the integration's drift
+and without the anti-windup's pauses, which left a steering offset behind (measured with the
+mass 30 % high on the shipped typical run, whose start clips: 1°, and a sideways velocity of
+5 mm/s for the rest of the run). For the steered wheels it is the angle error of 001's
+steering PD loops (eq. 25).
 """
 
 from __future__ import annotations
@@ -112,8 +119,8 @@ def desired_motion(model: PlatformModel, t: np.ndarray, twist: np.ndarray,
     step times t (T,) (uniform): the units' own coordinates from ``plans``
     (:meth:`PlatformModel.plans`, computed here when not given), their accelerations by central
     differences of the planned rates over ± ``window`` [s] (at least one step; one-sided at
-    the ends). The plan follows linearly interpolated setpoints, so its rate has a kink at
-    every setpoint sample: differenced over one integration step each would become a pulse of
+    the ends). The plan follows linearly interpolated setpoints, so its rate jumps at every
+    setpoint sample: differenced over one integration step each jump would become a pulse of
     height ∝ 1/dt (saturating a steering motor at 1 ms); over ± the setpoints' own sample
     interval it is spread over that interval, with the same area."""
     n_t, n_r = twist.shape[:2]
@@ -179,25 +186,21 @@ class ModelLaw:
         self.torque_max = np.asarray(torque_max, float)
         self.friction = control.friction
 
-    def initial_integral(self, angles: np.ndarray, desired: DesiredMotion) -> np.ndarray:
-        """ε_p at the start (R, D): zero for the base, s_d(0) − s(0) for the own coordinates."""
-        out = np.zeros((angles.shape[0], self.model.n_dof))
-        out[:, 3:] = desired.coord[0] - angles[:, self.model.coordinate_channels]
-        return out
-
-    def feedback(self, st: State, qd_d: np.ndarray, integral: np.ndarray, dt: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """(P_N (k_d ε_v + k_i ε_p), ε_p after the step, P_N) at state ``st`` (27)."""
+    def feedback(self, st: State, qd_d: np.ndarray, coord_d: np.ndarray, integral: np.ndarray,
+                 dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(P_N (k_d ε_v + k_i ε_p), the base rows' integral after the step) at state ``st``
+        for the desired velocity q̇_d (N, D) and own coordinates s_d (N, E) (27)."""
         proj = self.model.projector(st)
         e_v = project(proj, qd_d - velocity(self.model, st))  # ε_v = P_N (q̇_d − q̇), (27)
         e_p = integral + e_v * dt
-        return project(proj, self.control.kd * e_v + self.control.ki * e_p), e_p, proj
+        e_p[:, 3:] = coord_d - st.angles[:, self.model.coordinate_channels]  # ∫ of their rows
+        return project(proj, self.control.kd * e_v + self.control.ki * e_p), e_p
 
-    def torques(self, st: State, qd_d: np.ndarray, qdd_d: np.ndarray, integral: np.ndarray,
-                dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Actuator torques (N, A), clipped at τ_max, and the integral ε_p after the step (held
-        for runs whose torques were clipped)."""
-        acc, e_p, _ = self.feedback(st, qd_d, integral, dt)
+    def torques(self, st: State, qd_d: np.ndarray, qdd_d: np.ndarray, coord_d: np.ndarray,
+                integral: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Actuator torques (N, A), clipped at τ_max, and the base rows' integral after the
+        step (N, D) (held for runs whose torques were clipped; start from zeros)."""
+        acc, e_p = self.feedback(st, qd_d, coord_d, integral, dt)
         tau_raw = self.model.inverse_dynamics(st, self.control.params, qdd_d + acc,
                                               friction=self.friction,
                                               torque_max=self.torque_max)  # (26'), 001 19–23

@@ -293,7 +293,7 @@ def simulate(platform: Platform, params: DynamicParameters,
                               for r in runs)  # the setpoints' sample interval
                 desired = desired_motion(model, grid[:, 0] - t0[0], sp_all, sp_rate, plans,
                                          window=spacing)
-                integ = law.initial_integral(angles, desired)  # ε_p (R, D)
+                integ = np.zeros((n_runs, n_dof))  # ε_p's base rows (R, D)
             for step in range(steps + 1):
                 # controller (zero-order hold over the step)
                 st = model.state(q, qd, angles)
@@ -302,7 +302,7 @@ def simulate(platform: Platform, params: DynamicParameters,
                                                       desired.twist_rate[step],
                                                       desired.coord_rate[step],
                                                       desired.coord_acc[step])
-                    tau, integ = law.torques(st, qd_d, qdd_d, integ, dt)
+                    tau, integ = law.torques(st, qd_d, qdd_d, desired.coord[step], integ, dt)
                 else:  # decentralised: IK for the current unit angles
                     want, angle_err = model.setpoints(q, sp_all[step], sp_rate[step], angles,
                                                       plans, step)

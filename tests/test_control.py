@@ -75,8 +75,9 @@ def test_zero_error_gives_the_weighted_inverse_dynamics(name: str) -> None:
     # W = diag(1/τ_max²) depends on the limits' ratios alone: far limits weigh as the real
     # ones and clip nothing
     t_max = 100 * (LIMITS if name == "steered" else np.full(model.layout.n_currents, 4.0))
+    coord_d = angles[:, model.coordinate_channels]  # on the plan: no angle error either
     tau, integ = ModelLaw(model, ModelControl(truth), t_max).torques(
-        st, qd_d, qdd_d, np.zeros_like(qd), 1e-3)
+        st, qd_d, qdd_d, coord_d, np.zeros_like(qd), 1e-3)
     assert np.allclose(integ, 0.0, atol=1e-12)
     assert np.allclose(tau, model.inverse_dynamics(st, truth, qdd_d, torque_max=t_max),
                        atol=1e-10)
@@ -128,15 +129,15 @@ def tracking(model: PlatformModel, truth: Parameters, setpoints: Setpoints, res:
 
 
 def test_closed_loop_tracks_better_without_the_wheels_fighting() -> None:
-    """The turning run on the shipped vehicle (5 ms steps: quick, and all the same). 001's point: the decentralised loops
-    (PI on each drive's speed, PD on each steering angle) make the drives counteract — a torque
-    in the null space of P B_τ, which moves nothing — and track the twist worse than the
-    model-based law with the true parameters. With the controller's base mass 30 % high the
-    integral action keeps it tracking, better than the decentralised loops, worse than with
-    the true mass, and its torques still do not counteract. Measured (translation [m/s],
-    rotation [rad/s], internal torque [N m]): PI/PD 2.6e-3, 1.2e-2, 0.23; true 1.5e-4,
-    3.4e-4, 0; +30 % mass 6.8e-4, 2.1e-3, 0 (at 1 ms steps the same, but 7.5e-5 and 6.8e-5
-    with the true parameters)."""
+    """The turning run on the shipped vehicle (5 ms steps: quick, and much the same). 001's
+    point: the decentralised loops (PI on each drive's speed, PD on each steering angle) make
+    the drives counteract — a torque in the null space of P B_τ, which moves nothing — and
+    track the twist worse than the model-based law with the true parameters. With the
+    controller's base mass 30 % high the integral action keeps it tracking, better than the
+    decentralised loops, worse than with the true mass, and its torques still do not
+    counteract. Measured (translation [m/s], rotation [rad/s], internal torque [N m]): PI/PD
+    2.6e-3, 1.2e-2, 0.23; true 1.6e-4, 3.4e-4, 0; +30 % mass 6.9e-4, 2.1e-3, 0 (at 1 ms
+    steps the same, but 7.5e-5 and 6.8e-5 with the true parameters)."""
     pf, truth = platform_and_truth("steered")
     model, sp = PlatformModel(pf), turning_run()
     heavy = Parameters(truth.to_mapping() | {"m_b": 1.3 * truth["m_b"]})
