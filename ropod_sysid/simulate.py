@@ -1,9 +1,11 @@
 """Simulate logs with known parameters: forward dynamics (eq. 33) under a velocity controller.
 
-The controller is model-free, like the robot's own low-level one: the base-twist setpoint goes
-through each unit type's inverse kinematics at the *current* unit angles (for the swivel: eqs.
-8a, 11 at the current pivot angles) to actuator-rate setpoints, tracked by one PI loop per
-actuator with a torque limit, updated at the integration rate (zero-order hold). The plant —
+The controller is model-free by default, like the robot's own low-level one: the base-twist
+setpoint goes through each unit type's inverse kinematics at the *current* unit angles (for the
+swivel: eqs. 8a, 11 at the current pivot angles) to actuator-rate setpoints, tracked by one PI
+loop per actuator with a torque limit, updated at the integration rate (zero-order hold). With
+``control=`` :class:`ropod_sysid.control.ModelControl` the centralised model-based law of
+Stöger et al. (001) eq. 26 replaces those loops (:mod:`ropod_sysid.control`). The plant —
 the base pose and twist and every unit angle, whose rates each type gives — is integrated with
 fixed-step RK4 (default 1 kHz).
 
@@ -20,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ropod_sysid.control import ModelControl, ModelLaw, desired_motion, generalized_desired
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel, State
@@ -184,7 +187,8 @@ def simulate(platform: Platform, params: DynamicParameters,
              dt: float = 1e-3, controller: Controller | None = None,
              sensors: Sensors | None = None, force: ForceSchedule | None = None,
              initial: np.ndarray | str | None = "auto", quiet: bool = True,
-             source: str = "<simulation>", engine: str = "auto") -> list[SimResult]:
+             source: str = "<simulation>", engine: str = "auto",
+             control: ModelControl | None = None) -> list[SimResult]:
     """Simulate one run per setpoint series, all integrated together.
 
     Parameters
@@ -199,6 +203,9 @@ def simulate(platform: Platform, params: DynamicParameters,
         loop when numba is installed, every unit type of the platform has a kernel and the
         runs are at least :data:`MIN_COMPILED_STEPS` steps long. Both give the same results
         to round-off.
+    control : None for the decentralised loops of ``controller``; a
+        :class:`~ropod_sysid.control.ModelControl` for the model-based law of 001 eq. 26
+        (numpy engine only), whose torques ``controller``'s limits weigh and clip.
 
     Returns one :class:`SimResult` per setpoint series, sampled at ``rate``.
     """
@@ -208,6 +215,13 @@ def simulate(platform: Platform, params: DynamicParameters,
     check_run(rate, dt, controller, sensors)
     if engine not in ENGINES:
         raise InputError(f"engine {engine!r}: use {', '.join(ENGINES)}")
+    if control is not None:
+        control.check()
+        if engine == "numba":
+            raise InputError("engine 'numba': the compiled loop has the decentralised "
+                             "controllers only; use engine 'numpy' (or 'auto') with the "
+                             "model-based control law")
+        engine = "numpy"
     params.check_physical()
     friction = friction_of(params)
     model = PlatformModel(platform)
@@ -271,20 +285,36 @@ def simulate(platform: Platform, params: DynamicParameters,
             kp, ki, limit = None, None, None
             # planned angles of position-controlled joints (steering), on the step grid
             plans = model.plans(grid[:, 0] - t0[0], np.swapaxes(sp_all, 0, 1))
+            law, desired = None, None
+            if control is not None:
+                _, angle_err = model.setpoints(q, sp_all[0], sp_rate[0], angles, plans, 0)
+                law = ModelLaw(model, control, controller.gains(~np.isnan(angle_err[0]))[2])
+                spacing = max(float(np.median(np.diff(r.t))) if r.t.size > 1 else 0.0
+                              for r in runs)  # the setpoints' sample interval
+                desired = desired_motion(model, grid[:, 0] - t0[0], sp_all, sp_rate, plans,
+                                         window=spacing)
+                integ = np.zeros((n_runs, n_dof))  # ε_p's base rows (R, D)
             for step in range(steps + 1):
-                # controller (zero-order hold over the step): IK for the current unit angles
+                # controller (zero-order hold over the step)
                 st = model.state(q, qd, angles)
-                want, angle_err = model.setpoints(q, sp_all[step], sp_rate[step], angles, plans,
-                                                  step)
-                if kp is None:
-                    kp, ki, limit = controller.gains(~np.isnan(angle_err[0]))
-                err = want - st.actuator_rate
-                # PI on the rate (the integral), or PD on the angle (its error given)
-                held = np.where(np.isnan(angle_err), integ + err * dt, angle_err)
-                tau_raw = kp * err + ki * held
-                tau = np.clip(tau_raw, -limit, limit)
-                saturated = tau != tau_raw
-                integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
+                if law is not None and desired is not None:  # model-based (001 eq. 26)
+                    qd_d, qdd_d = generalized_desired(q, desired.twist[step],
+                                                      desired.twist_rate[step],
+                                                      desired.coord_rate[step],
+                                                      desired.coord_acc[step])
+                    tau, integ = law.torques(st, qd_d, qdd_d, desired.coord[step], integ, dt)
+                else:  # decentralised: IK for the current unit angles
+                    want, angle_err = model.setpoints(q, sp_all[step], sp_rate[step], angles,
+                                                      plans, step)
+                    if kp is None:
+                        kp, ki, limit = controller.gains(~np.isnan(angle_err[0]))
+                    err = want - st.actuator_rate
+                    # PI on the rate (the integral), or PD on the angle (its error given)
+                    held = np.where(np.isnan(angle_err), integ + err * dt, angle_err)
+                    tau_raw = kp * err + ki * held
+                    tau = np.clip(tau_raw, -limit, limit)
+                    saturated = tau != tau_raw
+                    integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
                 f_b = None if f_all is None else f_all[step]
                 k1 = deriv(q, qd, angles, tau, f_b, st)
                 if step % stride == 0:

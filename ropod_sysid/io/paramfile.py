@@ -305,15 +305,18 @@ def read_parameter_file(path: str | Path) -> ParameterFile:
 
 def read_parameters(path: str | Path, platform: Platform) -> ParameterFile:
     """A fit's parameter file, or a flat mapping name → value (a simulation's truth) as a
-    parameter file of ``platform`` without standard deviations; the parameter file's error
-    when it is neither."""
+    parameter file of ``platform`` without standard deviations. When it is neither: the flat
+    mapping's error for a file without a ``parameters`` key or a ROS 2 node (a flat mapping of
+    another platform: "unknown parameter …"), else the parameter file's error."""
     try:
         return read_parameter_file(path)
     except InputError as exc:
         try:
             values = read_truth_parameters(path, platform)
-        except InputError:
-            raise exc from None
+        except InputError as flat:
+            data = _load_mapping(Path(path), str(path), "parameter file")
+            raise (flat if "parameters" not in data and _ros2_node(data) is None
+                   else exc) from None
     return ParameterFile(platform.name, {k: {"value": v, "std": None} for k, v in values.items()},
                          {"translation": float("nan"), "rotation": float("nan")},
                          float("nan"), 0, 0)

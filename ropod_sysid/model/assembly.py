@@ -584,11 +584,18 @@ def weighted_right_inverse(b: np.ndarray, q_d: np.ndarray,
     """u (N, A) with B u = Q_d (N, D) for B (N, D, A) that minimises uᵀ W u, W =
     diag(1/τ_max²) (001 eqs. 19–21: u = W⁻¹Bᵀ(B W⁻¹ Bᵀ)⁻¹ Q_d, here by a pseudo-inverse of
     B W^(−1/2), which also serves a B without full row rank — the projected B_τ — and an
-    inconsistent Q_d, in the least-squares sense). W = I without ``torque_max`` (A,)."""
+    inconsistent Q_d, in the least-squares sense). W = I without ``torque_max`` (A,).
+
+    Singular values below :data:`RANK_TOLERANCE` × the largest count as zero: a projected B_τ
+    has exact zeros that round-off makes about 1e-15 of the largest, which numpy's default
+    cut-off (a few ε × the largest) sometimes keeps, adding an arbitrary component in
+    the null space (wheels pushing against each other; seen up to 0.2 N m on the steered
+    sample)."""
     if torque_max is None:
-        return np.einsum("nac,nc->na", np.linalg.pinv(b), q_d)
+        return np.einsum("nac,nc->na", np.linalg.pinv(b, rcond=RANK_TOLERANCE), q_d)
     scale = np.asarray(torque_max, float)  # W^(−1/2)
-    return scale * np.einsum("nac,nc->na", np.linalg.pinv(b * scale), q_d)
+    return scale * np.einsum("nac,nc->na", np.linalg.pinv(b * scale, rcond=RANK_TOLERANCE),
+                             q_d)
 
 
 def _take(values: np.ndarray, idx: np.ndarray, axis: int) -> np.ndarray:
