@@ -57,18 +57,18 @@ def plot(traj: Trajectory, path: str | Path, floor: Sequence[float] = DEFAULT_FL
     ax1.plot(traj.t, traj.speed(), label="|v| [m/s]")
     ax1.plot(traj.t, traj.acceleration(), label="|a| [m/s²]", lw=0.8)
     ax1.plot(traj.t, traj.omega, label="ω [rad/s]", lw=0.8)
-    if platform is not None and trailing_points(platform) is not None:
+    if platform is not None and (trailing_points(platform) is not None
+                                 or steering_points(platform) is not None):
         fine, _, pred = _variant_prediction(traj, platform)
-        ax1.plot(fine.t, np.abs(pred.turning[..., pred.turning_units]).max(axis=(0, 2)),
-                 label="max |δ̇| [rad/s]", lw=0.8)
-        if limits.pivot_rate_max is not None:
-            ax1.axhline(limits.pivot_rate_max, color="0.5", ls=":", lw=0.8)
-    if platform is not None and steering_points(platform) is not None:
-        fine, _, pred = _variant_prediction(traj, platform)
-        ax1.plot(fine.t, np.abs(pred.steering[..., pred.steering_units]).max(axis=(0, 2)),
-                 label="max |β̇| [rad/s]", lw=0.8)
-        if limits.steer_rate_max is not None:
-            ax1.axhline(limits.steer_rate_max, color="0.5", ls="-.", lw=0.8)
+        for rates, which, label, limit, ls in (
+                (pred.turning, pred.turning_units, "max |δ̇| [rad/s]", limits.pivot_rate_max, ":"),
+                (pred.steering, pred.steering_units, "max |β̇| [rad/s]", limits.steer_rate_max,
+                 "-.")):
+            if rates is None or not which.any():
+                continue
+            ax1.plot(fine.t, np.abs(rates[..., which]).max(axis=(0, 2)), label=label, lw=0.8)
+            if limit is not None:
+                ax1.axhline(limit, color="0.5", ls=ls, lw=0.8)
     ax1.axhline(limits.v_max, color="0.5", ls="--", lw=0.8)
     ax1.set_xlabel("t [s]")
     ax1.set_title("setpoints and limits")

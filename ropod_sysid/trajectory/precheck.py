@@ -298,6 +298,16 @@ class CheckReport:
                if self.sensors is not None else {}),
         }
 
+    def _peak_table(self, title: str, units: list[int], peak: np.ndarray, when: np.ndarray
+                    ) -> list[str]:
+        """A table of per-unit peaks (variants × ``units``) with their times, and a blank."""
+        out = [title, f"{'variant':<18}" + "".join(f"{'unit ' + self.units[j]:>12}"
+                                                 for j in units)]
+        for i, v in enumerate(VARIANTS):
+            cells = [f"{peak[i, j]:>6.2f} @{when[i, j]:>3.0f}s" for j in units]
+            out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
+        return [*out, ""]
+
     def text(self) -> str:
         """A readable account (table) for the terminal."""
         lim = self.limits
@@ -330,24 +340,13 @@ class CheckReport:
         out.append(f"{'floor y [' + f'{y0:g}, {y1:g}' + '] m':<36}{ext[:, 2].min():>10.2f}"
                    f"{ext[:, 3].max():>10.2f}  {'ok' if inside else 'LEFT'}")
         out.append("")
-        if self.turning:
-            out.append("max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):")
-            out.append(f"{'variant':<18}" + "".join(f"{'unit ' + self.units[j]:>12}"
-                                                    for j in self.turning))
-            for i, v in enumerate(VARIANTS):
-                cells = [f"{self.pivot_peak[i, j]:>6.2f} @{self.pivot_peak_time[i, j]:>3.0f}s"
-                         for j in self.turning]
-                out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
-            out.append("")
-        if self.steered:
-            out.append("max predicted steering rate per unit [rad/s] (planned steering):")
-            out.append(f"{'variant':<18}" + "".join(f"{'unit ' + self.units[j]:>12}"
-                                                    for j in self.steered))
-            for i, v in enumerate(VARIANTS):
-                cells = [f"{self.steer_peak[i, j]:>6.2f} @{self.steer_peak_time[i, j]:>3.0f}s"
-                         for j in self.steered]
-                out.append(f"{v:<18}" + "".join(f"{c:>12}" for c in cells))
-            out.append("")
+        for units, peak, when, title in (
+                (self.turning, self.pivot_peak, self.pivot_peak_time,
+                 "max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):"),
+                (self.steered, self.steer_peak, self.steer_peak_time,
+                 "max predicted steering rate per unit [rad/s] (planned steering):")):
+            if units:
+                out += self._peak_table(title, units, peak, when)
         if self.singular is not None:
             out += self.singular.text()
             out.append("")
