@@ -250,18 +250,6 @@ def error_gram(a_k: np.ndarray, cov: np.ndarray, groups: int | None = None) -> n
     return out[0] if groups is None else out
 
 
-def require_base_rows(model: object, what: str) -> None:
-    """The sensor-noise model covers platforms whose rows are the base's three: a one-line
-    :class:`InputError` naming ``what`` for one with units of their own coordinates."""
-    from ropod_sysid.errors import InputError
-
-    if getattr(model, "n_dof", 3) > 3:
-        platform = model.platform  # type: ignore[attr-defined]
-        raise InputError(f"{what}: the sensor-noise model does not cover units with coordinates "
-                         f"of their own yet ({platform.source} has "
-                         f"{', '.join(platform.types)} units); leave it out")
-
-
 def row_variances(model: object, st: object, params: object, noise: SensorNoise,
                   friction: str = "per-wheel") -> np.ndarray:
     """Variance (N, 3) [N², N², (N m)²] of each DOF of the equation rows at the states ``st``
@@ -270,7 +258,7 @@ def row_variances(model: object, st: object, params: object, noise: SensorNoise,
     docstring); ``params`` the true values (for M_dir)."""
     grid = noise.grid
     b_tau = st.b_tau  # type: ignore[attr-defined]
-    out = np.zeros((b_tau.shape[0], 3))
+    out = np.zeros(b_tau.shape[:2])  # (N, D)
     if noise.current_noise > 0:
         k_t = model.platform.torque_constants()  # type: ignore[attr-defined]
         power = float(np.sum(row_kernel(grid, current_kernel(grid)) ** 2))
@@ -284,16 +272,17 @@ def row_variances(model: object, st: object, params: object, noise: SensorNoise,
 
 def sigma_hat(variances: np.ndarray, w_rot: float) -> float:
     """σ̂ of the fit's weighted rows: √ of the mean over rows and DOFs of the variances
-    (N, 3), the θ rows weighted by ``w_rot``."""
+    (N, D), the θ rows and the units' own rows weighted by ``w_rot``."""
     v = variances.mean(axis=0)
-    return float(np.sqrt((v[0] + v[1] + w_rot**2 * v[2]) / 3.0))
+    return float(np.sqrt((v[0] + v[1] + w_rot**2 * v[2:].sum()) / v.size))
 
 
 def rotation_weight(b: np.ndarray) -> float:
     """Sec. VI-A's weight of the θ rows for rows b_ID (N, 3) (as
     :meth:`ropod_sysid.solve.Triangles.rotation_weight`)."""
     ms = np.mean(b**2, axis=0)
-    return float(np.sqrt(0.5 * (ms[0] + ms[1]) / ms[2])) if ms[2] > 0 else 1.0
+    rot = float(ms[2:].mean())  # the θ rows with the units' own rows (one kind)
+    return float(np.sqrt(0.5 * (ms[0] + ms[1]) / rot)) if rot > 0 else 1.0
 
 
 def base_columns(a: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -339,7 +328,7 @@ def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,
     if error_gram is not None:
         inside = np.isfinite(std)
         aw = a.copy()
-        aw[:, 2] *= w_rot
+        aw[:, 2:] *= w_rot
         flat = aw.reshape(-1, a.shape[-1])[:, inside]
         err = (error_gram[0] + error_gram[1] + w_rot**2 * error_gram[2])
         e_in = err[np.ix_(inside, inside)]

@@ -451,6 +451,12 @@ def at_rest(pre: Preprocessed) -> np.ndarray:
             & (np.abs(pre.angle_rates) < REST_RATE).all(axis=1))
 
 
+def held_joints(model: PlatformModel, coordinate_rates: np.ndarray) -> np.ndarray:
+    """(N, E) True where a unit's own coordinate moves slower than :data:`HELD_RATE` /
+    friction_tanh_gain [rad/s]: its rows are left out of the fit (:func:`raw_system`)."""
+    return np.abs(coordinate_rates) < HELD_RATE / model.alpha
+
+
 def raw_system(model: PlatformModel, pre: Preprocessed,
                friction: Friction = "per-wheel") -> tuple[np.ndarray, np.ndarray]:
     """A_ID,ext (M, 3, p) and b_ID (M, 3) sample by sample, before filtering (eqs. 36, 66);
@@ -471,8 +477,8 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
         a[rest] = 0.0
         b[rest] = 0.0
     if model.n_dof > 3:  # a unit's own rows while its joint is held
-        held = np.abs(pre.angle_rates[:, model.coordinate_channels]) < HELD_RATE / model.alpha
-        sample, coord = np.nonzero(held)
+        own_rates = pre.angle_rates[:, model.coordinate_channels]
+        sample, coord = np.nonzero(held_joints(model, own_rates))
         a[sample, 3 + coord] = 0.0
         b[sample, 3 + coord] = 0.0
     return a, b

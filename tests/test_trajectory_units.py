@@ -419,3 +419,24 @@ def test_cli_steering_rate_and_singular_report(tmp_path):
                                              value]))
         assert line == f"error: --steer-rate-max {value}: must be a finite number > 0 rad/s"
     assert not (tmp_path / "x").exists()
+
+
+def test_optimize_for_sigma_on_a_steered_platform(tmp_path):
+    """--objective sigma under a sensor model plans for steered units too (the steering's own
+    rows weighted with the θ rows, as the fit weighs them): four variants written, the
+    predicted σ and bias of J_st printed, within the steering-rate limit."""
+    out = tmp_path / "opt"
+    res = CliRunner().invoke(main, ["trajectory", "optimize", "--platform", str(STEERED),
+                                    "--params", str(STEERED.parent / "truth.json"),
+                                    "--objective", "sigma", "--duration", "20", "--maxiter",
+                                    "2", "--encoder-counts", "16384", "--current-noise", "0.03",
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "warning" not in res.output
+    assert "Jst σ" in res.output
+    assert sorted(p.name for p in out.iterdir()) == [
+        "mirrored.csv", "mirrored_negated.csv", "negated.csv", "original.csv"]
+    check = CliRunner().invoke(main, ["trajectory", "check", str(out / "original.csv"),
+                                      "--platform", str(STEERED), "--params",
+                                      str(STEERED.parent / "truth.json"), "--json"])
+    assert json.loads(check.output)["ok"]

@@ -107,13 +107,9 @@ class _Objective:
         self.rank: int | None = None
         self.evaluations = 0
         self.sigma = sigma
-        if sigma is not None:
-            from ropod_sysid.noise import require_base_rows
-
-            require_base_rows(self.model, "--objective sigma (use --objective cond)")
         self.rows_per_eval = (sigma.sensors.rows_per_second * step / grid_rate
                               if sigma is not None else 1.0)
-        self.variances: np.ndarray | None = None  # mean row variances (3,), from the 1st batch
+        self.variances: np.ndarray | None = None  # mean row variances (D,), from the 1st batch
         self.columns: np.ndarray | None = None  # the fit's base columns (rank deficiency)
 
     def twist(self, coef: np.ndarray, margin: float = 0.95,
@@ -191,7 +187,7 @@ class _Objective:
 
     def _sigma_value(self, a: np.ndarray, st: object) -> np.ndarray:
         """Mean log relative predicted σ of the target parameters (S,) from the candidates'
-        rows a (S, R, 3, p): the fit's white-noise σ (:mod:`ropod_sysid.noise`), the
+        rows a (S, R, D, p): the fit's white-noise σ (:mod:`ropod_sysid.noise`), the
         θ rows weighted as the fit weighs them, σ̂ from the rows' mean variances (taken once:
         they hardly depend on the run), on the fit's base columns when the platform leaves
         combinations (:meth:`SigmaTarget.columns`). (The errors-in-variables bias needs the
@@ -208,19 +204,20 @@ class _Objective:
         cols = self.columns
         assert cols is not None
         b = np.einsum("srdp,p->srd", a, sig.truth)
-        ms = np.mean(b**2, axis=1)  # (S, 3)
-        w = np.sqrt(0.5 * (ms[:, 0] + ms[:, 1]) / np.maximum(ms[:, 2], 1e-300))
+        ms = np.mean(b**2, axis=1)  # (S, D): the θ rows and the units' own rows are one kind
+        w = np.sqrt(0.5 * (ms[:, 0] + ms[:, 1]) / np.maximum(ms[:, 2:].mean(axis=1), 1e-300))
         v = self.variances
-        s2 = (v[0] + v[1] + w**2 * v[2]) / 3.0  # σ̂² of the weighted rows (S,)
+        s2 = (v[0] + v[1] + w**2 * v[2:].sum()) / v.size  # σ̂² of the weighted rows (S,)
         aw = a[..., cols].copy()
-        aw[:, :, 2, :] *= w[:, None, None]
+        aw[:, :, 2:, :] *= w[:, None, None, None]
         aw = aw.reshape(aw.shape[0], -1, len(cols))
         norms = np.linalg.norm(aw, axis=1)  # (S, q)
         norms = np.where(norms > 0, norms, 1.0)
         aw = aw / norms[:, None, :]
         gram = np.einsum("smi,smj->sij", aw, aw) * self.rows_per_eval
         lam, vec = np.linalg.eigh(gram)
-        inv_diag = np.einsum("sjk,sk->sj", vec**2, 1.0 / np.maximum(lam, 1e-300 * lam[:, -1:]))
+        floor = np.maximum(1e-300 * lam[:, -1:], 1e-300)  # a candidate that excites nothing
+        inv_diag = np.einsum("sjk,sk->sj", vec**2, 1.0 / np.maximum(lam, floor))
         var = inv_diag / norms**2 * (s2 * sig.correlation)[:, None]  # (S, q)
         tc = sig.target_cols(cols)
         return np.log(np.sqrt(var[:, tc]) / sig.scale[cols][tc]).mean(axis=1)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.noise import SensorNoise, predicted_fit_std, require_base_rows
+from ropod_sysid.noise import SensorNoise, predicted_fit_std
 from ropod_sysid.params import Parameters
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.identifiability import (
@@ -497,7 +497,6 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
         std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
     else:
-        require_base_rows(model, "the sensor model (--current-noise, --encoder-counts)")
         (a, var, gram), dt_eval = stacked_regressor(fine, twists, pred, model,  # type: ignore[misc]
                                                     friction, eval_rate, noise=(truth, sensors))
         std, bias, s_hat, _ = predicted_fit_std(a, var, true_values, sensors,
