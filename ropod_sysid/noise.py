@@ -285,16 +285,25 @@ def rotation_weight(b: np.ndarray) -> float:
     return float(np.sqrt(0.5 * (ms[0] + ms[1]) / rot)) if rot > 0 else 1.0
 
 
-def base_columns(a: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """The columns of rows ``a`` (M, 3, p) a fit keeps (:func:`ropod_sysid.solve.solve`): all
-    of them, or on a rank-deficient problem the base of each identifiable combination."""
+def predicted_solution(a: np.ndarray, truth: np.ndarray, names: list[str] | None = None
+                       ) -> object:
+    """The fit's solution (:func:`ropod_sysid.solve.solve`) of noise-free rows ``a`` (M, D, p)
+    whose b_ID is A m for the values ``truth`` (p,): its rank, the columns it keeps and the
+    combinations it names (``names``, default p0, p1, …)."""
     from ropod_sysid.fit import gram_triangle
     from ropod_sysid.solve import solve
 
     rows = a.reshape(-1, a.shape[-1])
     ab = np.column_stack([rows, rows @ truth])
-    sol = solve(gram_triangle(ab.T @ ab), rows.shape[0], [f"p{j}" for j in range(rows.shape[1])])
-    return np.flatnonzero(np.isfinite(sol.std_white))
+    return solve(gram_triangle(ab.T @ ab), rows.shape[0],
+                 names or [f"p{j}" for j in range(rows.shape[1])])
+
+
+def base_columns(a: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """The columns of rows ``a`` (M, D, p) a fit keeps (:func:`ropod_sysid.solve.solve`): all
+    of them, or on a rank-deficient problem the base of each identifiable combination."""
+    sol = predicted_solution(a, truth)
+    return np.flatnonzero(np.isfinite(sol.std_white))  # type: ignore[attr-defined]
 
 
 def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,

@@ -439,4 +439,9 @@ def test_optimize_for_sigma_on_a_steered_platform(tmp_path):
     check = CliRunner().invoke(main, ["trajectory", "check", str(out / "original.csv"),
                                       "--platform", str(STEERED), "--params",
                                       str(STEERED.parent / "truth.json"), "--json"])
-    assert json.loads(check.output)["ok"]
+    report = json.loads(check.output)
+    assert report["ok"]
+    # check names the combinations as the fit does (a wheel that cannot slip sideways carries
+    # J_rot,s/r² at its centre: n/r² = 200, Σ|p|²/r² = 18 for the shipped vehicle)
+    assert report["combinations"]["m_b"] == "m_b +200·Jrot_s"
+    assert report["combinations"]["Jzz_b"] == "Jzz_b +18·Jrot_s"

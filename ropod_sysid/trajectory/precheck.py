@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.noise import SensorNoise, predicted_fit_std
+from ropod_sysid.noise import SensorNoise, predicted_fit_std, predicted_solution
 from ropod_sysid.params import Parameters
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.identifiability import (
@@ -231,6 +231,7 @@ class CheckReport:
     steer_peak: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
     steer_peak_time: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
     singular: SingularReport | None = None
+    combinations: dict[str, str] = field(default_factory=dict)  # as the fit will name them
 
     @property
     def turning(self) -> list[int]:
@@ -287,6 +288,7 @@ class CheckReport:
             "rank": self.rank, "parameters": len(self.names),
             "condition_number": num(self.condition_number),
             "condition_number_full": num(self.conditioning.condition_number_full),
+            "combinations": dict(self.combinations),
             "noise": self.noise, "log_rate": self.log_rate,
             "predicted": {n: {"value": float(v), "std": num(s), "relative_std": num(r),
                               **({"bias": num(float(self.bias[j]))}
@@ -377,6 +379,10 @@ class CheckReport:
                        "thesis Sec. VI-C)")
         else:
             out.append(f"  condition number (all columns): {c.condition_number_full:.4g}")
+        if self.combinations:
+            out.append("  determined only in combination (as the fit will name them):")
+            width = max(len(n) for n in self.combinations)
+            out += [f"    {n:<{width}}  {text}" for n, text in self.combinations.items()]
         out.append("")
         if self.sensors is not None:
             out.append(f"predicted standard deviation of the fit (its white-noise σ) for "
@@ -512,7 +518,8 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
                        friction, wheel.max(axis=1),
                        [c for c, w in zip(platform.layout.current_names, pred.wheel_actuators,
                                           strict=True) if w],
-                       sensors, s_hat, bias, steer_peak, steer_peak_time, singular)
+                       sensors, s_hat, bias, steer_peak, steer_peak_time, singular,
+                       dict(predicted_solution(a, true_values, names).combinations))
 
 
 def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
