@@ -168,7 +168,7 @@ class LogPlot:
     span_samples: int  # the smoother's span
     row_step: int  # samples between equation rows
     # the rows' state (q, q̈, unit angles, their rates, actuator torques), for the model's
-    # predicted velocity (:func:`ropod_sysid.report.predicted_velocity`); None if not kept
+    # free-running simulation (:func:`ropod_sysid.validate.simulated_velocity`); None if not kept
     state_rows: tuple[np.ndarray, ...] | None = None
 
 

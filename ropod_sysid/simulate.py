@@ -17,7 +17,7 @@ more than one.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -259,9 +259,7 @@ def simulate(platform: Platform, params: DynamicParameters,
 
     def deriv(q: np.ndarray, qd: np.ndarray, angles: np.ndarray, tau: np.ndarray,
               f_b: np.ndarray | None, st: State | None = None) -> tuple[np.ndarray, ...]:
-        st = st if st is not None else model.state(q, qd, angles)
-        qdd = model.forward_dynamics(st, params, tau, f_b, friction, stabilize=BAUMGARTE)
-        return qd[:, :3], qdd, st.angle_rate
+        return derivatives(model, params, friction, q, qd, angles, tau, f_b, st)
 
     # setpoints and external force on the step grid, interpolated once: (steps + 1, runs, 3)
     grid = t0[None, :] + dt * np.arange(steps + 1)[:, None]
@@ -327,15 +325,8 @@ def simulate(platform: Platform, params: DynamicParameters,
                 if step == steps:
                     break
                 # RK4 with τ held over the step
-                y = (q, qd, angles)
-                y2 = tuple(a + 0.5 * dt * b for a, b in zip(y, k1, strict=True))
-                k2 = deriv(*y2, tau, f_b)
-                y3 = tuple(a + 0.5 * dt * b for a, b in zip(y, k2, strict=True))
-                k3 = deriv(*y3, tau, f_b)
-                y4 = tuple(a + dt * b for a, b in zip(y, k3, strict=True))
-                k4 = deriv(*y4, tau, f_b)
-                q, qd, angles = (a + dt / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
-                                 for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True))
+                q, qd, angles = rk4_step(lambda *y, f=f_b: deriv(*y, f), (q, qd, angles), dt,
+                                         (tau, tau, tau, tau), k1)
                 bar.update(1)
 
     rng = np.random.default_rng(sensors.seed)
@@ -352,6 +343,35 @@ def simulate(platform: Platform, params: DynamicParameters,
         res.log = record(platform, res, t_true, sensors, rng, source)
         results.append(res)
     return results
+
+
+def derivatives(model: PlatformModel, params: DynamicParameters, friction: str,
+                q: np.ndarray, qd: np.ndarray, angles: np.ndarray, tau: np.ndarray,
+                f_b: np.ndarray | None = None, st: State | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rates of the simulated state (pose q (R, 3), generalized velocity q̇ (R, D), unit
+    angles (R, J)) under torques τ (R, A): (q̇ of the base, q̈ by the constrained forward
+    dynamics with Baumgarte's term, the unit angles' rates)."""
+    st = st if st is not None else model.state(q, qd, angles)
+    qdd = model.forward_dynamics(st, params, tau, f_b, friction, stabilize=BAUMGARTE)
+    return qd[:, :3], qdd, st.angle_rate
+
+
+def rk4_step(deriv: Callable[..., tuple[np.ndarray, ...]], y: tuple[np.ndarray, ...],
+             dt: float, taus: tuple[np.ndarray, ...], k1: tuple[np.ndarray, ...] | None = None
+             ) -> tuple[np.ndarray, ...]:
+    """One classical Runge–Kutta step of the state ``y`` = (q, q̇, angles) over ``dt`` [s],
+    ``deriv(q, q̇, angles, τ)`` its rates, ``taus`` the torques at the four stages (at t,
+    t + dt/2 twice, t + dt), ``k1`` the rates at y if known."""
+    k1 = deriv(*y, taus[0]) if k1 is None else k1
+    y2 = tuple(a + 0.5 * dt * b for a, b in zip(y, k1, strict=True))
+    k2 = deriv(*y2, taus[1])
+    y3 = tuple(a + 0.5 * dt * b for a, b in zip(y, k2, strict=True))
+    k3 = deriv(*y3, taus[2])
+    y4 = tuple(a + dt * b for a, b in zip(y, k3, strict=True))
+    k4 = deriv(*y4, taus[3])
+    return tuple(a + dt / 6 * (b1 + 2 * b2 + 2 * b3 + b4)
+                 for a, b1, b2, b3, b4 in zip(y, k1, k2, k3, k4, strict=True))
 
 
 def compiled_groups(model: PlatformModel, params: DynamicParameters, friction: str,

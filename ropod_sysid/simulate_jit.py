@@ -230,6 +230,49 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                 x[j] = x[j] + dt / 6 * (ks[0, j] + 2 * ks[1, j] + 2 * ks[2, j] + ks[3, j])
 
 
+@njit(cache=True, error_model="numpy")
+def replay(groups: tuple, bp: np.ndarray, t: np.ndarray, tau: np.ndarray, n_sub: int,
+           x: np.ndarray, rec_x: np.ndarray) -> None:
+    """The state x (6 + J: pose, twist, unit angles) integrated from t[0] by RK4 under the
+    torques ``tau`` (M, A) given at the times t (M,), linearly interpolated between them,
+    ``n_sub`` steps per interval, no controller: a free-running simulation. ``rec_x`` (M, 6 + J)
+    receives the state at every t; ``x`` ends at t[-1]."""
+    n_x = x.shape[0]
+    n_act = tau.shape[1]
+    m = np.empty((3, 3))
+    b, ff, rhs = np.empty(3), np.empty(3), np.empty(3)
+    btau = np.zeros((3, n_act))
+    tauf, crate, now = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act)
+    arate = np.zeros(n_x - 6)
+    fb = np.zeros(3)
+    ks = np.empty((4, n_x))
+    y = np.empty(n_x)
+    frac = np.array([0.0, 0.5, 0.5, 1.0])
+    rec_x[0] = x
+    for i in range(t.shape[0] - 1):
+        dt = (t[i + 1] - t[i]) / n_sub
+        for sub in range(n_sub):
+            for stage in range(4):
+                f = (sub + frac[stage]) / n_sub
+                for a in range(n_act):
+                    now[a] = (1.0 - f) * tau[i, a] + f * tau[i + 1, a]
+                if stage == 0:
+                    for j in range(n_x):
+                        y[j] = x[j]
+                else:
+                    h = dt if stage == 3 else 0.5 * dt
+                    for j in range(n_x):
+                        y[j] = x[j] + h * ks[stage - 1, j]
+                _eom(groups, bp, y, m, b, btau, tauf, ff, arate, crate)
+                k = ks[stage]
+                _accel(y, m, b, btau, tauf, ff, now, fb, False, rhs, k[3:6])
+                k[0:3] = y[3:6]
+                k[6:] = arate
+            for j in range(n_x):
+                x[j] = x[j] + dt / 6 * (ks[0, j] + 2 * ks[1, j] + 2 * ks[2, j] + ks[3, j])
+        rec_x[i + 1] = x
+
+
 def groups_of(model: PlatformModel, params: Mapping[str, float], friction: str
               ) -> tuple[np.ndarray, ...] | None:
     """The groups of the model as the flat arrays :func:`run` takes, or None when a group's

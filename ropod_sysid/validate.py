@@ -104,31 +104,98 @@ def validate_logs(logs: Sequence[Log], platform: Platform, params: DynamicParame
     return [validate_log(log, platform, params, span, input_delay, row_step) for log in logs]
 
 
-PREDICTION_WINDOW_S = 2.0  # the predicted velocity restarts from the measured one this often
+FREE_RUN_STEP = 1e-3  # longest integration step of the free-running simulation [s]
+# where a unit type has no compiled kernel (steered units) the numpy path takes each step in
+# Python (about 1.7 ms a step for two steered wheels): it steps at most 2 ms (the steered
+# sample's fit % then within 1e-5 of 1 ms steps; 5 ms lose 1–2 points), and the report's free
+# run covers the first log's first FREE_RUN_NUMPY_S
+FREE_RUN_NUMPY_STEP = 2e-3
+FREE_RUN_NUMPY_S = 5.0
 
 
-def predicted_velocity(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
+def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
+             q0: np.ndarray, qd0: np.ndarray, angles0: np.ndarray, tau: np.ndarray,
+             max_step: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fitted model simulated forward from the measured state at t[0] under the measured
+    torques alone — no controller, nothing measured after the start: pose (M, 3), generalized
+    velocity (M, D) and unit angles (M, J) at the times t (M,) [s].
+
+    q0 (3,), qd0 (D,) [world frame; then the units' own coordinates' rates], angles0 (J,) the
+    start; tau (M, A) the actuator torques, linearly interpolated between the samples. RK4
+    (eq. 33; with constraints their projection and Baumgarte's term, as the simulator) in
+    steps of at most ``max_step`` (default :data:`FREE_RUN_STEP` compiled —
+    :func:`ropod_sysid.simulate_jit.replay`, where every unit type has a kernel — and
+    :data:`FREE_RUN_NUMPY_STEP` on the numpy path)."""
+    from ropod_sysid import simulate_jit
+    from ropod_sysid.simulate import derivatives, rk4_step
+
+    t = np.asarray(t, float)
+    friction = friction_of(params)
+    groups = simulate_jit.groups_of(model, params, friction) if model.n_dof == 3 else None
+    step = max_step or (FREE_RUN_STEP if groups is not None else FREE_RUN_NUMPY_STEP)
+    n_sub = max(1, int(np.ceil(float(np.max(np.diff(t), initial=0.0)) / step - 1e-9)))
+    if groups is not None:
+        x = np.concatenate([q0, qd0[:3], angles0]).astype(float)
+        rec = np.empty((t.size, x.size))
+        simulate_jit.replay(groups, simulate_jit.base_parameters(model, params, friction), t,
+                            np.ascontiguousarray(tau, float), n_sub, x, rec)
+        return rec[:, :3], rec[:, 3:6], rec[:, 6:]
+    y = (q0[None].astype(float), qd0[None].astype(float), angles0[None].astype(float))
+    out = [y]
+
+    def rates(q: np.ndarray, qd: np.ndarray, ang: np.ndarray, torque: np.ndarray
+              ) -> tuple[np.ndarray, ...]:
+        return derivatives(model, params, friction, q, qd, ang, torque)
+
+    for i in range(t.size - 1):  # the time steps are sequential; each step is vectorised
+        dt = (t[i + 1] - t[i]) / n_sub
+        for sub in range(n_sub):
+            f0, f1 = sub / n_sub, (sub + 1) / n_sub
+            at = [((1 - f) * tau[i] + f * tau[i + 1])[None] for f in (f0, 0.5 * (f0 + f1), f1)]
+            y = rk4_step(rates, y, dt, (at[0], at[1], at[1], at[2]))
+        out.append(y)
+    return tuple(np.concatenate([o[k] for o in out]) for k in range(3))  # type: ignore[return-value]
+
+
+def simulated_velocity(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
                        qd: np.ndarray, state: tuple[np.ndarray, ...],
-                       window: float = PREDICTION_WINDOW_S) -> np.ndarray:
-    """The base velocity (N, 3) the fitted model predicts under the measured torques: from
-    the measured q̇ at the start of each ``window`` [s], the trapezoidal integral of the
-    model's accelerations q̈ = M_dir⁻¹ (B_τ (τ + τ_f) + f_f + b_dir) (eq. 33) at the measured
-    pose and unit angles. ``state`` = (q, q̈, angles, angle rates, τ) at the times ``t``."""
+                       horizon: float | None = None) -> np.ndarray:
+    """The base twist (M, 3) in the base frame (v_x, v_y [m/s], ω [rad/s]) of the fitted model
+    simulated forward under the measured torques (:func:`free_run`) from the measured state at
+    t[0]: measured base velocity ``qd`` (M, 3, world frame) and ``state`` = (q, q̈, angles,
+    angle rates, τ) at the times t (the rows'); NaN after ``horizon`` [s] from the start when
+    given. In the base frame the simulation's heading error, which grows without bound in an
+    open-loop run, does not turn its velocities (the dynamics do not depend on the heading)."""
     q, _, angles, rates, tau = state
-    st = model.state(q, qd, angles, rates)
-    # the base's accelerations (with constraints: those they allow, the constraint forces
-    # solved for, eqs. 33 and 001 eqs. 11–15)
-    qdd = model.forward_dynamics(st, params, tau, friction=friction_of(params))[:, :3]
-    steps = 0.5 * (qdd[1:] + qdd[:-1]) * np.diff(t)[:, None]
-    integral = np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
-    seg = np.floor((t - t[0]) / window).astype(int)
-    start = np.searchsorted(seg, seg)  # first row of each row's window
-    return qd[start] + integral - integral[start]
+    m = t.size if horizon is None else int(np.searchsorted(t, t[0] + horizon, "right"))
+    own = rates[0, model.coordinate_channels] if model.n_dof > 3 else np.zeros(0)
+    sim_q, sim_qd, _ = free_run(model, params, t[:m], q[0], np.concatenate([qd[0], own]),
+                                angles[0], tau[:m])
+    out = np.full((t.size, 3), np.nan)
+    out[:m] = base_frame(sim_q[:, 2], sim_qd[:, :3])
+    return out
+
+
+def base_frame(theta: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """World-frame base velocities (M, 3) at headings θ (M,) as base-frame twists (M, 3)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.column_stack([c * qd[:, 0] + s * qd[:, 1], -s * qd[:, 0] + c * qd[:, 1], qd[:, 2]])
+
+
+def has_compiled_kernels(model: PlatformModel, params: DynamicParameters) -> bool:
+    """Whether :func:`free_run` runs compiled for this platform (every unit type a kernel)."""
+    from ropod_sysid import simulate_jit
+
+    return model.n_dof == 3 and simulate_jit.groups_of(model, params,
+                                                        friction_of(params)) is not None
 
 
 def fit_percentage(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖) per column (the fit of MATLAB's ``compare`` and WPILib's
-    SysId): 100 is a perfect prediction, 0 no better than the mean."""
+    SysId): 100 is a perfect prediction, 0 no better than the mean; over the rows where the
+    prediction is finite."""
+    keep = np.isfinite(predicted).all(axis=1)
+    measured, predicted = measured[keep], predicted[keep]
     err = np.linalg.norm(measured - predicted, axis=0)
     spread = np.linalg.norm(measured - measured.mean(axis=0), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):

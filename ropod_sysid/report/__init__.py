@@ -70,10 +70,12 @@ from ropod_sysid.summary import (
 )
 from ropod_sysid.validate import (
     FORCE_THRESHOLD,
-    PREDICTION_WINDOW_S,
+    FREE_RUN_NUMPY_S,
     TORQUE_THRESHOLD,
+    base_frame,
     fit_percentage,
-    predicted_velocity,
+    has_compiled_kernels,
+    simulated_velocity,
     validate_logs,
 )
 
@@ -265,10 +267,14 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
         predicted = None
-        if plot.state_rows is not None and len(plot.t_rows) > 2:
-            predicted = predicted_velocity(model, params, plot.t_rows, plot.qd_rows,
-                                           plot.state_rows)
-        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(plot.qd_rows,
+        compiled = has_compiled_kernels(model, params)
+        if plot.state_rows is not None and len(plot.t_rows) > 2 and (compiled or k == 0):
+            predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows,
+                                           plot.state_rows,
+                                           None if compiled else FREE_RUN_NUMPY_S)
+        measured = (base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
+                    if predicted is not None and plot.state_rows is not None else None)
+        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured,
                                                                           predicted)),
                             strict=True)) if predicted is not None else None)
         views.append({
@@ -291,9 +297,12 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
             "fit_pct": fit_pct,
-            "prediction": (painter.draw("predicted_velocity", plot.t_rows, plot.qd_rows,
-                                        predicted, fit_pct, PREDICTION_WINDOW_S)
+            "prediction": (painter.draw("predicted_velocity", plot.t_rows, measured,
+                                        predicted, fit_pct)
                            if predicted is not None and k == 0 else None),
+            "prediction_span": (None if predicted is None else
+                                float(plot.t_rows[np.isfinite(predicted[:, 0])][-1]
+                                      - plot.t_rows[0])),
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
@@ -455,7 +464,6 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
                                   result.options.rcond),
         "null_space": sol.null_space_text(),
         "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
-        "prediction_window": PREDICTION_WINDOW_S,
         "combinations": [(k, v) for k, v in sol.combinations.items()],
         "hist_figure": painter.draw("residual_histograms", all_err),
         "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),

@@ -360,10 +360,10 @@ def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:
 
 
 def predicted_velocity(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray,
-                       fit_pct: dict[str, float] | None, window: float) -> bytes:
-    """Measured base velocity (grey) against the fitted model's prediction under the measured
-    torques (blue), restarted every ``window`` seconds, per world axis."""
-    labels = ("ẋ_b [m/s]", "ẏ_b [m/s]", "θ̇_b [rad/s]")
+                       fit_pct: dict[str, float] | None) -> bytes:
+    """Measured base twist (grey) against the fitted model simulated forward from the first
+    row under the measured torques (blue; NaN where not simulated), in the base frame."""
+    labels = ("v_x [m/s]", "v_y [m/s]", "ω [rad/s]")  # base frame
     keys = ("x", "y", "theta")
     with _style():
         fig = _figure(10.0, 5.2, top=0.94, bottom=0.09, left=0.08, hspace=0.35)
@@ -374,8 +374,6 @@ def predicted_velocity(t: np.ndarray, measured: np.ndarray, predicted: np.ndarra
             ax.set_ylabel(labels[d])
             pct = "" if fit_pct is None else f"  fit {fit_pct[keys[d]]:.1f} %"
             _title(ax, f"{keys[d]}{pct}")
-            for x0 in np.arange(t[0], t[-1], window):
-                ax.axvline(x0, color="#cccccc", lw=0.5, zorder=0)
         axes[0].legend(loc="upper right", fontsize=8, ncols=2)
         axes[-1].set_xlabel("t [s]")
         return _png(fig)
