@@ -428,8 +428,8 @@ def test_optimize_for_sigma_on_a_steered_platform(tmp_path):
     out = tmp_path / "opt"
     res = CliRunner().invoke(main, ["trajectory", "optimize", "--platform", str(STEERED),
                                     "--params", str(STEERED.parent / "truth.json"),
-                                    "--objective", "sigma", "--duration", "20", "--maxiter",
-                                    "2", "--encoder-counts", "16384", "--current-noise", "0.03",
+                                    "--objective", "sigma", "--duration", "12", "--maxiter",
+                                    "1", "--encoder-counts", "16384", "--current-noise", "0.03",
                                     "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert "warning" not in res.output
