@@ -35,6 +35,7 @@ from ropod_sysid.model.units import omni_jit, swivel_jit
 
 KERNELS: tuple[Any, ...] = (swivel_jit, omni_jit)  # a kernel's id is its index here
 CHUNK = 2000  # steps per compiled call (between progress-bar updates)
+NO_TORQUES = np.zeros((1, 1, 1))  # run's tau_given when its controller acts
 
 
 @njit(cache=True, error_model="numpy")
@@ -157,16 +158,46 @@ def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _control(groups: tuple, x: np.ndarray, sp: np.ndarray, qd_set: np.ndarray,
+             want: np.ndarray, bp: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray,
+             tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray, crate: np.ndarray,
+             integ: np.ndarray, tau: np.ndarray, kp: float, ki: float, limit: float,
+             dt: float) -> None:
+    """The controller (zero-order hold over the step): IK for the current unit angles, one PI
+    loop per actuator with anti-windup and the torque limit; also leaves the equations of
+    motion at x in m, b, btau, tauf, ff, arate, crate."""
+    kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
+    c, s = math.cos(x[2]), math.sin(x[2])
+    qd_set[0] = c * sp[0] - s * sp[1]
+    qd_set[1] = s * sp[0] + c * sp[1]
+    qd_set[2] = sp[2]
+    for g in range(kinds.shape[0]):
+        _unit_actuator_rates(kinds[g], geo[goff[g]:goff[g + 1]],
+                             ia[iaoff[g]:iaoff[g + 1]], ic[icoff[g]:icoff[g + 1]],
+                             x[0:3], qd_set, x[6:], want)
+    _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
+    for a in range(tau.shape[0]):
+        err = want[a] - crate[a]
+        raw = kp * err + ki * (integ[a] + err * dt)
+        tau[a] = min(max(raw, -limit), limit)
+        if tau[a] == raw:  # anti-windup
+            integ[a] = integ[a] + err * dt
+
+
+@njit(cache=True, error_model="numpy")
 def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int, end: int,
         last: np.ndarray, sp_all: np.ndarray, f_all: np.ndarray, has_fb: bool, x_all: np.ndarray,
         integ_all: np.ndarray, rec_q: np.ndarray, rec_qd: np.ndarray, rec_qdd: np.ndarray,
-        rec_ang: np.ndarray, rec_tau: np.ndarray, rec_fb: np.ndarray, rec_e: np.ndarray
-        ) -> None:
+        rec_ang: np.ndarray, rec_tau: np.ndarray, rec_fb: np.ndarray, rec_e: np.ndarray,
+        tau_given: np.ndarray) -> None:
     """Steps ``first`` … ``end`` (at most ``last[r]`` for run r) of every run: the controller,
     the records and RK4 with τ held over the step; the states ``x_all`` (R, 6 + J) and PI
-    integrators ``integ_all`` (R, A) are updated in place."""
+    integrators ``integ_all`` (R, A) are updated in place. With ``ctrl[4]`` > 0 there is no
+    controller: each step holds the torques ``tau_given[step, r]`` (a free-running
+    simulation under given torques, :func:`ropod_sysid.validate.free_run`)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
     kp, ki, limit, dt = ctrl[0], ctrl[1], ctrl[2], ctrl[3]
+    given = ctrl.shape[0] > 4 and ctrl[4] > 0
     n_runs, n_x = x_all.shape
     n_act = integ_all.shape[1]
     m = np.empty((3, 3))
@@ -181,23 +212,13 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
         x = x_all[r]
         integ = integ_all[r]
         for step in range(first, min(end, last[r]) + 1):
-            # controller (zero-order hold over the step): IK for the current unit angles
-            sp = sp_all[step, r]
-            c, s = math.cos(x[2]), math.sin(x[2])
-            qd_set[0] = c * sp[0] - s * sp[1]
-            qd_set[1] = s * sp[0] + c * sp[1]
-            qd_set[2] = sp[2]
-            for g in range(kinds.shape[0]):
-                _unit_actuator_rates(kinds[g], geo[goff[g]:goff[g + 1]],
-                                     ia[iaoff[g]:iaoff[g + 1]], ic[icoff[g]:icoff[g + 1]],
-                                     x[0:3], qd_set, x[6:], want)
-            _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
-            for a in range(n_act):
-                err = want[a] - crate[a]
-                raw = kp * err + ki * (integ[a] + err * dt)
-                tau[a] = min(max(raw, -limit), limit)
-                if tau[a] == raw:  # anti-windup
-                    integ[a] = integ[a] + err * dt
+            if given:
+                _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
+                for a in range(n_act):
+                    tau[a] = tau_given[step, r, a]
+            else:
+                _control(groups, x, sp_all[step, r], qd_set, want, bp, m, b, btau, tauf, ff,
+                         arate, crate, integ, tau, kp, ki, limit, dt)
             fb = f_all[step if has_fb else 0, r]
             k1 = ks[0]
             _accel(x, m, b, btau, tauf, ff, tau, fb, has_fb, rhs, k1[3:6])
@@ -228,49 +249,6 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                 kn[6:] = arate
             for j in range(n_x):
                 x[j] = x[j] + dt / 6 * (ks[0, j] + 2 * ks[1, j] + 2 * ks[2, j] + ks[3, j])
-
-
-@njit(cache=True, error_model="numpy")
-def replay(groups: tuple, bp: np.ndarray, t: np.ndarray, tau: np.ndarray, n_sub: int,
-           x: np.ndarray, rec_x: np.ndarray) -> None:
-    """The state x (6 + J: pose, twist, unit angles) integrated from t[0] by RK4 under the
-    torques ``tau`` (M, A) given at the times t (M,), linearly interpolated between them,
-    ``n_sub`` steps per interval, no controller: a free-running simulation. ``rec_x`` (M, 6 + J)
-    receives the state at every t; ``x`` ends at t[-1]."""
-    n_x = x.shape[0]
-    n_act = tau.shape[1]
-    m = np.empty((3, 3))
-    b, ff, rhs = np.empty(3), np.empty(3), np.empty(3)
-    btau = np.zeros((3, n_act))
-    tauf, crate, now = np.zeros(n_act), np.zeros(n_act), np.zeros(n_act)
-    arate = np.zeros(n_x - 6)
-    fb = np.zeros(3)
-    ks = np.empty((4, n_x))
-    y = np.empty(n_x)
-    frac = np.array([0.0, 0.5, 0.5, 1.0])
-    rec_x[0] = x
-    for i in range(t.shape[0] - 1):
-        dt = (t[i + 1] - t[i]) / n_sub
-        for sub in range(n_sub):
-            for stage in range(4):
-                f = (sub + frac[stage]) / n_sub
-                for a in range(n_act):
-                    now[a] = (1.0 - f) * tau[i, a] + f * tau[i + 1, a]
-                if stage == 0:
-                    for j in range(n_x):
-                        y[j] = x[j]
-                else:
-                    h = dt if stage == 3 else 0.5 * dt
-                    for j in range(n_x):
-                        y[j] = x[j] + h * ks[stage - 1, j]
-                _eom(groups, bp, y, m, b, btau, tauf, ff, arate, crate)
-                k = ks[stage]
-                _accel(y, m, b, btau, tauf, ff, now, fb, False, rhs, k[3:6])
-                k[0:3] = y[3:6]
-                k[6:] = arate
-            for j in range(n_x):
-                x[j] = x[j] + dt / 6 * (ks[0, j] + 2 * ks[1, j] + 2 * ks[2, j] + ks[3, j])
-        rec_x[i + 1] = x
 
 
 def groups_of(model: PlatformModel, params: Mapping[str, float], friction: str
@@ -326,7 +304,8 @@ def integrate(groups: tuple[np.ndarray, ...], bp: np.ndarray, ctrl: np.ndarray, 
     bar.set(0.0, force=True)  # drawn while a first call compiles or loads the cache
     for first in range(0, steps + 1, CHUNK):
         end = min(first + CHUNK - 1, steps)
-        run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ, *records)
+        run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ, *records,
+            NO_TORQUES)
         bar.set(min(end, steps))
 
 

@@ -121,25 +121,44 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     velocity (M, D) and unit angles (M, J) at the times t (M,) [s].
 
     q0 (3,), qd0 (D,) [world frame; then the units' own coordinates' rates], angles0 (J,) the
-    start; tau (M, A) the actuator torques, linearly interpolated between the samples. RK4
-    (eq. 33; with constraints their projection and Baumgarte's term, as the simulator) in
-    steps of at most ``max_step`` (default :data:`FREE_RUN_STEP` compiled —
-    :func:`ropod_sysid.simulate_jit.replay`, where every unit type has a kernel — and
+    start; tau (M, A) the actuator torques, linearly interpolated between the samples and held
+    over each integration step at its middle. RK4 (eq. 33; with constraints their projection
+    and Baumgarte's term, as the simulator) in steps of at most ``max_step`` (default
+    :data:`FREE_RUN_STEP` compiled — the simulator's loop :func:`ropod_sysid.simulate_jit.run`
+    with given torques, where every unit type has a kernel and t is uniform — and
     :data:`FREE_RUN_NUMPY_STEP` on the numpy path)."""
     from ropod_sysid import simulate_jit
     from ropod_sysid.simulate import derivatives, rk4_step
 
     t = np.asarray(t, float)
     friction = friction_of(params)
-    groups = simulate_jit.groups_of(model, params, friction) if model.n_dof == 3 else None
+    dts = np.diff(t)
+    uniform = dts.size > 0 and np.allclose(dts, dts[0], rtol=1e-6, atol=0.0)
+    groups = (simulate_jit.groups_of(model, params, friction)
+              if model.n_dof == 3 and uniform else None)
     step = max_step or (FREE_RUN_STEP if groups is not None else FREE_RUN_NUMPY_STEP)
-    n_sub = max(1, int(np.ceil(float(np.max(np.diff(t), initial=0.0)) / step - 1e-9)))
+    n_sub = max(1, int(np.ceil(float(np.max(dts, initial=0.0)) / step - 1e-9)))
+    # each step holds the torques interpolated at its middle (zero-order hold, as the drives)
+    frac = (np.arange(n_sub) + 0.5) / n_sub
+    if t.size < 2:
+        return (np.asarray(q0, float)[None], np.asarray(qd0, float)[None],
+                np.asarray(angles0, float)[None])
+    held = (tau[:-1, None, :] * (1.0 - frac)[None, :, None]
+            + tau[1:, None, :] * frac[None, :, None])  # (M − 1, n_sub, A)
     if groups is not None:
-        x = np.concatenate([q0, qd0[:3], angles0]).astype(float)
-        rec = np.empty((t.size, x.size))
-        simulate_jit.replay(groups, simulate_jit.base_parameters(model, params, friction), t,
-                            np.ascontiguousarray(tau, float), n_sub, x, rec)
-        return rec[:, :3], rec[:, 3:6], rec[:, 6:]
+        n_steps = (t.size - 1) * n_sub
+        n_act = tau.shape[1]
+        x = np.concatenate([q0, qd0[:3], angles0]).astype(float)[None]
+        given = np.zeros((n_steps + 1, 1, n_act))
+        given[:-1, 0] = held.reshape(-1, n_act)
+        rec = (np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)),
+               np.empty((t.size, 1, angles0.size)), np.empty((t.size, 1, n_act)),
+               np.zeros((t.size, 1, 3)), np.empty((t.size, 1)))
+        simulate_jit.run(groups, simulate_jit.base_parameters(model, params, friction),
+                         np.array([0.0, 0.0, 0.0, dts[0] / n_sub, 1.0]), n_sub, 0, n_steps,
+                         np.array([n_steps]), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), False,
+                         x, np.zeros((1, n_act)), *rec, given)
+        return rec[0][:, 0], rec[1][:, 0], rec[3][:, 0]
     y = (q0[None].astype(float), qd0[None].astype(float), angles0[None].astype(float))
     out = [y]
 
@@ -148,11 +167,10 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
         return derivatives(model, params, friction, q, qd, ang, torque)
 
     for i in range(t.size - 1):  # the time steps are sequential; each step is vectorised
-        dt = (t[i + 1] - t[i]) / n_sub
+        dt = dts[i] / n_sub
         for sub in range(n_sub):
-            f0, f1 = sub / n_sub, (sub + 1) / n_sub
-            at = [((1 - f) * tau[i] + f * tau[i + 1])[None] for f in (f0, 0.5 * (f0 + f1), f1)]
-            y = rk4_step(rates, y, dt, (at[0], at[1], at[1], at[2]))
+            now = held[i, sub][None]
+            y = rk4_step(rates, y, dt, (now, now, now, now))
         out.append(y)
     return tuple(np.concatenate([o[k] for o in out]) for k in range(3))  # type: ignore[return-value]
 
