@@ -114,9 +114,9 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     ranges = {k: (float(np.nanmin(v)) + 0.0, float(np.nanmax(v)) + 0.0)  # (no "-0")
               for k, v in log.columns().items()}
 
-    vel, moving, widths, used = _base_velocity(log, platform, t, dt_med, c)
-    moving_time = float(np.sum(widths[moving]))
     model = PlatformModel(platform)
+    vel, moving, widths, used = _base_velocity(log, model, t, dt_med, c)
+    moving_time = float(np.sum(widths[moving]))
     sideways = _sideways_singular(model)
     base_used = (None if used is None or moving_time == 0
                  else float(np.sum(widths[moving & used]) / moving_time))
@@ -197,19 +197,18 @@ def motion_shortfall(seconds: float, what: str = "of motion",
     return None
 
 
-def _base_velocity(log: Log, platform: Platform, t: np.ndarray, dt_med: float,
+def _base_velocity(log: Log, model: PlatformModel, t: np.ndarray, dt_med: float,
                    c: Criteria) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Base-frame twist (N, 3) from the encoders (rates smoothed over ~50 ms), the samples
     that move (N,), each sample's share of the time axis [s] (N,), and (constrained platforms,
     else None) the samples whose base rows the fit keeps (N,)."""
     if t.size < 3:
         return np.zeros((0, 3)), np.zeros(t.size, bool), np.zeros(t.size), None
-    angles, _ = unwrap_angles(platform.layout.wrapped, log.angles)
+    angles, _ = unwrap_angles(model.platform.layout.wrapped, log.angles)
     rates = np.gradient(angles, t, axis=0)
     w = max(1, int(round(0.05 / dt_med))) if dt_med > 0 else 1
     if w > 1:
         rates = uniform_filter1d(rates, w, axis=0, mode="nearest")
-    model = PlatformModel(platform)
     vel = base_twist(model, angles, rates)
     moving = (np.hypot(vel[:, 0], vel[:, 1]) > c.moving_speed) | \
         (np.abs(vel[:, 2]) > c.moving_turn)

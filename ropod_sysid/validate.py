@@ -127,15 +127,12 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     :data:`FREE_RUN_STEP` compiled — the simulator's loop :func:`ropod_sysid.simulate_jit.run`
     with given torques, where every unit type has a kernel and t is uniform — and
     :data:`FREE_RUN_NUMPY_STEP` on the numpy path)."""
-    from ropod_sysid import simulate_jit
     from ropod_sysid.simulate import derivatives, rk4_step
 
     t = np.asarray(t, float)
     friction = friction_of(params)
     dts = np.diff(t)
-    uniform = dts.size > 0 and np.allclose(dts, dts[0], rtol=1e-6, atol=0.0)
-    groups = (simulate_jit.groups_of(model, params, friction)
-              if model.n_dof == 3 and uniform else None)
+    groups = _compiled_groups(model, params, t)
     step = max_step or (FREE_RUN_STEP if groups is not None else FREE_RUN_NUMPY_STEP)
     n_sub = max(1, int(np.ceil(float(np.max(dts, initial=0.0)) / step - 1e-9)))
     # each step holds the torques interpolated at its middle (zero-order hold, as the drives)
@@ -146,6 +143,8 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     held = (tau[:-1, None, :] * (1.0 - frac)[None, :, None]
             + tau[1:, None, :] * frac[None, :, None])  # (M − 1, n_sub, A)
     if groups is not None:
+        from ropod_sysid import simulate_jit
+
         n_steps = (t.size - 1) * n_sub
         n_act = tau.shape[1]
         x = np.concatenate([q0, qd0[:3], angles0]).astype(float)[None]
@@ -200,12 +199,22 @@ def base_frame(theta: np.ndarray, qd: np.ndarray) -> np.ndarray:
     return np.column_stack([c * qd[:, 0] + s * qd[:, 1], -s * qd[:, 0] + c * qd[:, 1], qd[:, 2]])
 
 
-def has_compiled_kernels(model: PlatformModel, params: DynamicParameters) -> bool:
-    """Whether :func:`free_run` runs compiled for this platform (every unit type a kernel)."""
-    from ropod_sysid import simulate_jit
+def _compiled_groups(model: PlatformModel, params: DynamicParameters, t: np.ndarray
+                     ) -> tuple[np.ndarray, ...] | None:
+    """The unit groups for the compiled loop, or None for :func:`free_run`'s numpy path: a
+    unit type without a kernel, numba missing, or times ``t`` not uniform."""
+    from ropod_sysid.simulate import compiled_groups
 
-    return model.n_dof == 3 and simulate_jit.groups_of(model, params,
-                                                        friction_of(params)) is not None
+    dts = np.diff(np.asarray(t, float))
+    if dts.size == 0 or not np.allclose(dts, dts[0], rtol=1e-6, atol=0.0):
+        return None
+    return compiled_groups(model, params, friction_of(params), "auto")
+
+
+def runs_compiled(model: PlatformModel, params: DynamicParameters, t: np.ndarray) -> bool:
+    """Whether :func:`free_run` at the times ``t`` takes the compiled loop (fast) rather than
+    numpy steps in Python."""
+    return _compiled_groups(model, params, t) is not None
 
 
 def fit_percentage(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:

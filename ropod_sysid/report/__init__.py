@@ -74,7 +74,7 @@ from ropod_sysid.validate import (
     TORQUE_THRESHOLD,
     base_frame,
     fit_percentage,
-    has_compiled_kernels,
+    runs_compiled,
     simulated_velocity,
     validate_logs,
 )
@@ -267,7 +267,7 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
         predicted = None
-        compiled = has_compiled_kernels(model, params)
+        compiled = runs_compiled(model, params, plot.t_rows)
         if plot.state_rows is not None and len(plot.t_rows) > 2 and (compiled or k == 0):
             predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows,
                                            plot.state_rows,
