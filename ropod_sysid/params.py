@@ -61,8 +61,8 @@ INERTIAL_NAMES = frozenset(BASE_PARAMETERS).union(
 def inertial_names(platform: Platform) -> list[str]:
     """m_b, J_zz,b and the inertial parameters of the platform's unit types, in m_ext order."""
     names = list(BASE_PARAMETERS)
-    for t in platform.types:
-        names += UNIT_TYPES[t].inertial_names
+    for t in platform.types:  # a type also on legs shares its inertial parameters
+        names += [n for n in UNIT_TYPES[t].inertial_names if n not in names]
     return names
 
 
@@ -74,7 +74,7 @@ def friction_names(platform: Platform, friction: Friction = "per-wheel") -> list
     names: list[str] = []
     for t in platform.types:
         units = [u.name for u in platform.units if u.type == t]
-        names += UNIT_TYPES[t].friction_names(units, friction)
+        names += [n for n in UNIT_TYPES[t].friction_names(units, friction) if n not in names]
     return names
 
 

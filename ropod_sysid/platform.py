@@ -17,7 +17,7 @@ import numpy as np
 import yaml
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.model.units import UNIT_TYPES, Channel
+from ropod_sysid.model.units import UNIT_TYPES, WHEEL_TYPES, Channel
 from ropod_sysid.model.units.entry import UNIT_NAME as UNIT_NAME
 from ropod_sysid.model.units.entry import number
 from ropod_sysid.model.units.swivel import SwivelSpec
@@ -220,8 +220,8 @@ class Platform:
         for u in self.units:
             d = u.to_entry(self.settings)
             if u.type != "swivel":
-                d = {"name": d.pop("name"), "type": u.type} | {k: v for k, v in d.items()
-                                                                 if k != "type"}
+                d = {"name": d.pop("name"), "type": d.get("type", u.type)} | {
+                    k: v for k, v in d.items() if k != "type"}
             units.append(d)
         out["units"] = units
         if self.joint_state is not None:
@@ -268,10 +268,12 @@ def _settings(data: dict[str, Any], where: str) -> dict[str, float]:
 
 def _unit_type(entry: Any, k: int, where: str) -> Any:
     utype = str(entry.get("type", "swivel")) if isinstance(entry, dict) else "swivel"
-    if utype not in UNIT_TYPES:
+    if utype not in WHEEL_TYPES:
         raise InputError(
             f"{where}: 'units[{k}].type' is {utype!r}; known unit types: "
-            f"{', '.join(UNIT_TYPES)} — use one of them (or leave 'type' out for swivel)")
+            f"{', '.join(WHEEL_TYPES)} — use one of them (or leave 'type' out for swivel)")
+    if isinstance(entry, dict) and "leg" in entry:  # the wheel on a leg (``<type>+leg``)
+        return UNIT_TYPES[f"{utype}+leg"]
     return UNIT_TYPES[utype]
 
 

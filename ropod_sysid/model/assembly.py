@@ -76,30 +76,31 @@ SLIP_MARGIN = 0.01
 SLIP_RANK = 1e-3
 
 
-def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float = 0.0
-                   ) -> np.ndarray:
+def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float = 0.0,
+                   rank: int = CONSISTENT_RANK) -> np.ndarray:
     """P = I − G⁺G (N, D, D), the orthogonal projector onto the null space of constraint rows
     G (N, C, D): by an SVD, singular values below :data:`RANK_TOLERANCE` × the largest
     dropped (001 eqs. 11–15 with a rank tolerance instead of Algorithm 1's divisions), and G
-    taken at rank :data:`CONSISTENT_RANK` at most (:func:`consistent_constraints`).
+    taken at ``rank`` at most (:func:`consistent_constraints`; rigid wheels:
+    :data:`CONSISTENT_RANK`, wheels on legs: every row, :attr:`PlatformModel.motion_rank`).
 
     ``margin`` > 0 (identification): where the base block of G is near singular — its
     smallest singular value of the regular rank below ``margin`` × its largest — the base rows
     are removed altogether (P's base block zero). There the null direction turns with the
     smallest error of the measured angles, and the constraint forces, large near a singular
     configuration, would leak into the rows; the units' own rows are free of them and stay.
-    ``slip`` > 0: so are they where G has more than :data:`CONSISTENT_RANK` rows and its next
+    ``slip`` > 0: so are they where G has more than ``rank`` rows and its next
     singular value exceeds ``slip`` × its largest (the wheels' angles miss a common centre:
     they slip, and the odometry with them)."""
     _, sv, vt = np.linalg.svd(g, full_matrices=False)  # vt (N, min(C, D), D)
     keep = sv > RANK_TOLERANCE * np.maximum(sv[:, :1], np.finfo(float).tiny)
-    keep[:, CONSISTENT_RANK:] = False
+    keep[:, rank:] = False
     v = vt * keep[..., None]
     proj = np.eye(n_dof) - np.einsum("nri,nrj->nij", v, v)
     if margin > 0 or slip > 0:
-        near = base_singular_ratio(g) < margin
-        if slip > 0 and g.shape[1] > CONSISTENT_RANK:
-            near |= base_singular_ratio(g, CONSISTENT_RANK + 1) > slip
+        near = base_singular_ratio(g, min(g.shape[1], rank)) < margin
+        if slip > 0 and g.shape[1] > rank:
+            near |= base_singular_ratio(g, rank + 1) > slip
         proj[near, :3, :] = 0.0
         proj[near, :, :3] = 0.0
     return proj
@@ -120,13 +121,15 @@ def consistent_constraints(g: np.ndarray, c: np.ndarray, rank: int = CONSISTENT_
 
 def base_singular_ratio(g: np.ndarray, regular: int | None = None) -> np.ndarray:
     """How near each sample's constraint rows G (N, C, D) are to losing rank: σ_r / σ_1 (N,)
-    of their base block G[:, :, :3], σ_r its r-th largest singular value, r the rank the
-    platform has when regular — ``regular``, else that of C rows consistent with one
-    instantaneous centre, min(C, :data:`CONSISTENT_RANK`). 0 where the block has lost rank
-    (001 Property 3–4: all wheel axles on one line); :func:`null_projector` leaves out the
-    base rows where it is below its ``margin``. (With ``regular`` = CONSISTENT_RANK + 1: how
-    far the rows miss one centre, its slip test.)"""
-    base = np.linalg.svd(g[:, :, :3], compute_uv=False)  # (N, min(C, 3))
+    of G, σ_r its r-th largest singular value, r the rank the platform has when regular —
+    ``regular``, else that of C rows consistent with one instantaneous centre,
+    min(C, :data:`CONSISTENT_RANK`). For rigid wheels G's own columns are zero (the lateral
+    rows hold no steering rate) and these are the base block's values; a leg's extension
+    rate adds a column of its own. 0 where the rows have lost rank (001 Property 3–4: all
+    wheel axles on one line); :func:`null_projector` leaves out the base rows where it is
+    below its ``margin``. (With ``regular`` = CONSISTENT_RANK + 1: how far the rows miss one
+    centre, its slip test.)"""
+    base = np.linalg.svd(g, compute_uv=False)  # (N, min(C, D))
     if regular is None:
         regular = min(g.shape[1], CONSISTENT_RANK)
     regular = min(max(regular, 1), base.shape[1])
@@ -288,23 +291,25 @@ class PlatformModel:
                                                                            strict=True)],
                            axis=1)
         c = np.concatenate([p[1] for p in parts], axis=1)
-        return (g, c) if exact else consistent_constraints(g, c)
+        return (g, c) if exact else consistent_constraints(g, c, self.motion_rank or 0)
 
     @property
     def motion_rank(self) -> int | None:
-        """Rank of the base block of the constraint rows while the platform moves regularly:
-        the largest over three generic twists, every unit at the angles it takes for that
-        motion (:meth:`initial_angles`: steered wheels along their centre velocities, so that
-        the axles meet at the instantaneous centre); None without constraints. (Angles that
-        fit no motion — measured ones, with noise — may give a higher rank.)"""
+        """Rank of the constraint rows while the platform moves regularly: the largest over
+        three generic twists, every unit at the angles it takes for that motion
+        (:meth:`initial_angles`: steered wheels along their centre velocities, so that the
+        axles meet at the instantaneous centre; 2 for rigid wheels, every row for wheels on
+        legs, whose extension rates enter the rows); None without constraints. (Angles that
+        fit no motion — measured ones, with noise — may give a higher rank: the constraints
+        are taken at this rank, :func:`consistent_constraints`.)"""
         if not self.constrained:
             return None
         if self._motion_rank is None:
             twists = np.array([[0.31, 0.17, 0.53], [-0.23, 0.41, -0.37], [0.11, -0.29, 0.83]])
             angles = np.stack([self.initial_angles(tw) for tw in twists])
             st = self.state(np.zeros((3, 3)), twists, angles, np.zeros_like(angles))
-            g = self.constraints(st)[0]  # type: ignore[index]
-            sv = np.linalg.svd(g[:, :, :3], compute_uv=False)
+            g = self.constraints(st, exact=True)[0]  # type: ignore[index]
+            sv = np.linalg.svd(g, compute_uv=False)
             self._motion_rank = int(np.sum(sv > RANK_TOLERANCE * sv[:, :1], axis=1).max())
         return self._motion_rank
 
@@ -318,7 +323,8 @@ class PlatformModel:
     def projector(self, st: State) -> np.ndarray | None:
         """P = I − G⁺G (N, D, D) onto the motions the constraints allow (None: unconstrained)."""
         con = self.constraints(st)
-        return None if con is None else null_projector(con[0], self.n_dof)
+        return None if con is None else null_projector(con[0], self.n_dof,
+                                                       rank=self.motion_rank or 0)
 
     def angle_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Rates of the unit angles implied by the base motion (N, J) (for the swivel: δ̇ of
@@ -384,16 +390,18 @@ class PlatformModel:
     def friction(self, st: State, params: object, friction: Friction = "per-wheel"
                  ) -> tuple[np.ndarray, np.ndarray | None]:
         """Friction torques τ_f (N, A) added to the actuator torques and the generalized
-        friction force f_f (N, 3) of the unactuated joints and the base (or None)."""
+        friction force f_f (N, D) of the unactuated joints and the base (or None)."""
         check_variant(friction)
         parts, f_f = [], None
-        for (g, unit), data in zip(self.groups, st.units, strict=True):
+        for (g, unit), data, rows in zip(self.groups, st.units, self.rows, strict=True):
             parts.append((g.currents, unit.friction_torques(data, params, friction)))
             f = unit.friction_force(data, params, friction)
-            if f is not None:
+            if f is not None:  # on the base rows, or on the group's rows (a leg's friction)
+                f = _rows(f, rows if f.shape[1] == rows.size else np.arange(3), self.n_dof)
                 f_f = f if f_f is None else f_f + f
         if friction == "body":
-            f = base.body_friction_force(st.q[:, 2], st.qd, params, self.alpha)
+            f = _rows(base.body_friction_force(st.q[:, 2], st.qd, params, self.alpha),
+                      np.arange(3), self.n_dof)
             f_f = f if f_f is None else f_f + f
         return _gather(parts, self.layout.n_currents, 1), f_f
 
@@ -408,8 +416,6 @@ class PlatformModel:
             m_dir = m_dir + _rows(m_add, rows, d, (1, 2))
             b_dir = b_dir + _rows(b_add, rows, d)
         tau_f, f_f = self.friction(st, params, friction)
-        if f_f is not None:
-            f_f = _rows(f_f, np.arange(3), d)
         return DirectEOM(m_dir, _rows(base.b_fb(st.q[:, 2]), np.arange(3), d), st.b_tau, b_dir,
                          tau_f, f_f)
 
@@ -552,7 +558,7 @@ class PlatformModel:
         :data:`SLIP_MARGIN`)."""
         con = self.constraints(st, exact=True)
         return None if con is None else null_projector(con[0], self.n_dof, SINGULAR_MARGIN,
-                                                       SLIP_MARGIN)
+                                                       SLIP_MARGIN, self.motion_rank or 0)
 
     @staticmethod
     def _shared_spots(spots: list[tuple[np.ndarray | slice, np.ndarray | slice]]

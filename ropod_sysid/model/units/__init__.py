@@ -273,9 +273,13 @@ def unit_major(values: np.ndarray, per_unit: int) -> np.ndarray:
 
 # The registry of unit types by their platform-file ``type:`` name. Imported last: a type's module
 # imports Channel and FrictionVariant from here.
+from ropod_sysid.model.units.legs import legged  # noqa: E402
 from ropod_sysid.model.units.omni import OmniUnits  # noqa: E402
 from ropod_sysid.model.units.steered import SteeredUnits  # noqa: E402
 from ropod_sysid.model.units.swivel import SwivelUnits  # noqa: E402
 
-UNIT_TYPES: dict[str, Any] = {cls.type_name: cls for cls in (SwivelUnits, OmniUnits,
-                                                              SteeredUnits)}
+WHEEL_TYPES: dict[str, Any] = {cls.type_name: cls for cls in (SwivelUnits, OmniUnits,
+                                                               SteeredUnits)}
+# every wheel type also on a leg (an entry with ``leg:``): type names ``<type>+leg``
+UNIT_TYPES: dict[str, Any] = WHEEL_TYPES | {f"{name}+leg": legged(cls)
+                                            for name, cls in WHEEL_TYPES.items()}

@@ -131,6 +131,7 @@ class OmniUnits:
     angles = (Channel("phi_{u}", "phi", "rad", "wheel encoder angle, unwrapped"),)
     currents = (Channel("cur_{u}", "cur", "A", "motor current"),)
     platform_keys = ("wheel_radius", "torque_constant")
+    attachment_key = "position"  # the entry's attachment point (a leg replaces it)
     entry_keys = ("name", "type", "position", "heading", "wheel_radius", "torque_constant")
     inertial_names = ("Jrot_o",)
     parameter_info = {

@@ -225,6 +225,7 @@ class SteeredUnits:
                 Channel("cur_{u}S", "cur_S", "A", "steering motor current"))
     coordinates = (STEER,)  # the unit's angles that are coordinates of the platform
     platform_keys = ("wheel_radius", "torque_constant", "steer_torque_constant")
+    attachment_key = "position"  # the entry's attachment point (a leg replaces it)
     entry_keys = ("name", "type", "position", "wheel_radius", "torque_constant",
                   "steer_torque_constant")
     inertial_names = ("Jst", "Jrot_s")

@@ -218,6 +218,7 @@ class SwivelUnits:
     currents = (Channel("cur_{u}L", "cur_L", "A", "left motor current"),
                 Channel("cur_{u}R", "cur_R", "A", "right motor current"))
     platform_keys = (*GEOMETRY, "torque_constant")
+    attachment_key = "pivot"  # the entry's attachment point (a leg replaces it)
     entry_keys = ("name", "type", "pivot", *GEOMETRY, "torque_constant", "left_motor",
                   "sign_left", "sign_right", "pivot_offset", "ethercat_number")
     inertial_names = ("m_wh", "Jzz_wh", "Jrot_w")

@@ -1,0 +1,601 @@
+"""Wheel units on movable legs: any wheel type on a passive prismatic joint (DLR's Justin base).
+
+Robuffo Giordano, Fuchs, Albu-Schäffer and Hirzinger, *On the kinematic modeling and control of
+a mobile platform equipped with steering wheels and movable legs* (cited as 002) give the
+kinematics of centred steering wheels whose legs extend and retract horizontally; the legs have
+no motor, the wheels' rolling forces move them. 002 gives no dynamics: they are derived here for
+any wheel type, and checked by ``tests/test_legs.py`` (a hand derivation of 002's rows, the
+constant-leg reduction, a Lagrangian with finite-difference Jacobians, energy).
+
+Geometry. Unit i's leg has its hip h_i and unit axis a_i in the base frame and extension λ_i;
+its wheel unit is attached at P_i = h_i + λ_i a_i. The leg's end carries a frame L_i that
+translates with the leg and turns with the base: origin r + R(θ) λ_i a_i, heading θ. In L_i the
+wheel unit sits at the fixed point h_i, so every formula of its type holds unchanged in L_i's
+coordinates q_L = (x_L, y_L, θ). With d_i = R(θ) λ_i a_i and â_i = R(θ) a_i (world)
+
+    q̇_L = T q̇,     T = [[I₂, S d_i, â_i], [0, 1, 0]]                                  (L1)
+    q̈_L = T q̈ + Ṫ q̇,   Ṫ q̇ = (−θ̇² d_i + 2 θ̇ λ̇_i S â_i, 0)                          (L2)
+
+(columns: x, y, θ, λ_i; S a 90° turn; the unit's own coordinates pass through unchanged). By
+the virtual power of the unit's forces through q̇_L = T q̇, its contributions transform as
+
+    M_add = Tᵀ M_add,L T,   b_dir = Tᵀ (b_dir,L − M_add,L Ṫ q̇),   B_τ = Tᵀ B_τ,L       (L3)
+    G = G_L T,   Ġ q̇ = Ġ_L q̇_L + G_L Ṫ q̇                                             (L4)
+
+and the identification columns are Tᵀ A_ID,L at q̈_L of (L2). For a steered wheel G_L is 001's
+lateral row; at h = 0, a = (cos α, sin α) it is 002 eq. (17) with Γ_i = sin(α_i − φ_i):
+
+    −sin(θ + β_i) ẋ + cos(θ + β_i) ẏ + (P_i · h_β) θ̇ + sin(α_i − β_i) λ̇_i = 0            (L5)
+
+Solved for the steering angle it gives 002 eq. (18) with the cos α_i / sin α_i factors its
+print lacks (those of eq. 12): β_i = atan2(v_y + λ_i cos α_i θ̇ + sin α_i λ̇_i,
+v_x − λ_i sin α_i θ̇ + cos α_i λ̇_i) in the base frame.
+
+The leg. The mass m_leg that moves with the attachment point (the leg's carriage and, for a
+centred wheel, the wheel unit: its type keeps that mass in m_b when fixed) is a point mass at
+P_i, world velocity v_P = A_P q̇ with A_P = [I₂, S R P_i, â_i] (x, y, θ, λ_i):
+
+    M_add += m_leg A_Pᵀ A_P,   b_dir += −m_leg A_Pᵀ (−θ̇² R P_i + 2 θ̇ λ̇_i S â_i)          (L6)
+
+(its own inertia about a vertical axis is constant and stays in J_zz,b). The joint is passive:
+no actuator; its friction f_lv λ̇ + f_lc tanh(α λ̇) [N] acts on the λ_i row (signs as for the
+ropod: dissipative values ≤ 0). A constant leg (λ̇ = 0 and P_i the fixed attachment point)
+gives exactly the fixed unit plus the point mass m_leg at P_i.
+
+Identifiable combinations: a centred wheel that cannot slip sideways carries its spin inertia
+like a point mass J_rot/r² at its centre, so along the leg only m_leg + J_rot,s/r² is
+determined (the fit's rank analysis names that combination); with legs that never move m_leg
+lumps with m_b and J_zz,b, and the leg friction has no rows.
+
+Odometry. A unit's constraint rows A ν_L = b on L_i's base-frame twist ν_L = Tᵦ ν + (λ̇ a, 0),
+Tᵦ = [[I₂, S λ a], [0, 1]] (base frame), become rows on the base twist with right-hand side
+b − A (λ̇ a, 0) (:meth:`LeggedUnits.normal_equations`).
+
+One group holds one legged unit (its transform is its own); the legs' mass is one parameter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.model.units import (
+    AnglePrediction,
+    Channel,
+    FrictionVariant,
+    check_variant,
+    series,
+)
+
+LEG_CHANNEL = Channel("leg_{u}", "leg", "m", "leg extension lambda (attachment point hip + "
+                      "lambda * axis)")
+LEG_KEYS = ("hip", "axis", "range")
+AXIS_TOLERANCE = 1e-3  # |axis| may differ from 1 by this much (then it is normalised)
+
+
+@dataclass(frozen=True)
+class LegSpec:
+    """A leg: hip h and unit axis a in the base frame [m], its extension range [m]."""
+
+    hip: tuple[float, float]
+    axis: tuple[float, float]
+    range: tuple[float, float]
+
+    def point(self, extension: np.ndarray | float) -> np.ndarray:
+        """Attachment points h + λ a (…, 2) [m] at extensions λ (…)."""
+        lam = np.asarray(extension, float)[..., None]
+        return np.asarray(self.hip) + lam * np.asarray(self.axis)
+
+    @property
+    def middle(self) -> float:
+        """The middle of the extension range [m]."""
+        return 0.5 * (self.range[0] + self.range[1])
+
+    def to_entry(self) -> dict[str, list[float]]:
+        return {"hip": list(self.hip), "axis": list(self.axis), "range": list(self.range)}
+
+
+@dataclass(frozen=True)
+class LeggedSpec:
+    """A wheel unit (``wheel``: its type's spec, attached at the hip) on a leg."""
+
+    wheel: Any
+    leg: LegSpec
+
+    @property
+    def name(self) -> str:
+        return str(self.wheel.name)
+
+    @property
+    def type(self) -> str:
+        return f"{self.wheel.type}+leg"
+
+    @property
+    def position(self) -> tuple[float, float]:
+        """The attachment point at the middle of the leg's range [m] (nominal)."""
+        p = self.leg.point(self.leg.middle)
+        return float(p[0]), float(p[1])
+
+    def moved(self, position: Sequence[float]) -> LeggedSpec:
+        """The same unit with its leg shifted so that the nominal point is ``position``."""
+        shift = np.asarray(position, float) - np.asarray(self.position)
+        hip = (self.leg.hip[0] + float(shift[0]), self.leg.hip[1] + float(shift[1]))
+        return LeggedSpec(self.wheel.moved(hip), LegSpec(hip, self.leg.axis, self.leg.range))
+
+    def to_entry(self, defaults: Mapping[str, Any]) -> dict[str, Any]:
+        d = dict(self.wheel.to_entry(defaults))
+        for key in ("pivot", "position"):
+            d.pop(key, None)
+        d["type"] = self.wheel.type
+        d["leg"] = self.leg.to_entry()
+        return d
+
+
+def _pair(value: Any, at: str, key: str, what: str) -> tuple[float, float]:
+    if (not isinstance(value, list | tuple) or len(value) != 2
+            or not all(isinstance(v, int | float) and not isinstance(v, bool)
+                       and np.isfinite(float(v)) for v in value)):
+        raise InputError(f"{at}: key 'leg.{key}' must be two finite numbers ({what})")
+    return float(value[0]), float(value[1])
+
+
+def parse_leg(entry: Mapping[str, Any], at: str) -> LegSpec:
+    """The ``leg:`` mapping of a unit entry, validated; one-line errors."""
+    leg = entry.get("leg")
+    example = "{hip: [x, y], axis: [ex, ey], range: [lmin, lmax]}"
+    if not isinstance(leg, Mapping):
+        raise InputError(f"{at}: key 'leg' must be a mapping like {example}")
+    unknown = sorted(set(map(str, leg)) - set(LEG_KEYS))
+    if unknown:
+        raise InputError(f"{at}: unknown key 'leg.{unknown[0]}'; known keys: "
+                         f"{', '.join(LEG_KEYS)}")
+    for key in LEG_KEYS:
+        if key not in leg:
+            raise InputError(f"{at}: 'leg' has no '{key}'; give it as {example}")
+    hip = _pair(leg["hip"], at, "hip", "the leg's hip in the base frame in metres")
+    axis = _pair(leg["axis"], at, "axis", "a unit vector along the leg in the base frame")
+    norm = float(np.hypot(*axis))
+    if norm == 0.0:
+        raise InputError(f"{at}: 'leg.axis' is zero; give a unit vector along the leg, e.g. "
+                         "[1, 0]")
+    if abs(norm - 1.0) > AXIS_TOLERANCE:
+        raise InputError(f"{at}: 'leg.axis' has length {norm:.4g}; give a unit vector "
+                         f"(e.g. [{axis[0] / norm:.4f}, {axis[1] / norm:.4f}])")
+    lo, hi = _pair(leg["range"], at, "range", "the least and greatest extension in metres")
+    if not lo < hi:
+        raise InputError(f"{at}: 'leg.range' is [{lo:g}, {hi:g}]; give [lmin, lmax] with "
+                         "lmin < lmax in metres")
+    return LegSpec(hip, (axis[0] / norm, axis[1] / norm), (lo, hi))
+
+
+@dataclass
+class LegData:
+    """Per-sample kinematics of one legged unit: its wheel type's data in the leg-end frame L
+    and the transform to the platform's coordinates (L1, L2)."""
+
+    wheel: Any  # the wheel type's data at (q_L, q̇_L)
+    qd: np.ndarray  # (N, 3) base twist, world
+    lam: np.ndarray  # (N,) λ [m]
+    lam_rate: np.ndarray  # (N,) λ̇ [m/s]
+    t: np.ndarray  # (N, 3 + e, 4 + e) T of (L1) with the wheel's e own coordinates
+    t_dot_qd: np.ndarray  # (N, 3 + e) Ṫ q̇ (L2)
+    a_p: np.ndarray  # (N, 2, 4 + e) A_P of (L6)
+    a_p_dot_qd: np.ndarray  # (N, 2) Ȧ_P q̇
+
+    @property
+    def b_tau(self) -> np.ndarray:
+        """B_τ = Tᵀ B_τ,L (L3); (N, 4 + e, m)."""
+        return np.einsum("nri,nra->nia", self.t, self.wheel.b_tau)
+
+    @property
+    def angle_rate(self) -> np.ndarray:
+        return np.concatenate([self.wheel.angle_rate, self.lam_rate[:, None]], axis=1)
+
+    @property
+    def actuator_rate(self) -> np.ndarray:
+        return self.wheel.actuator_rate
+
+
+def _turn(v: np.ndarray) -> np.ndarray:
+    """S v: vectors (…, 2) turned by 90°."""
+    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+
+
+def _rotate(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R(θ) v for θ (N,) and v (2,) or (N, 2)."""
+    c, s = np.cos(theta), np.sin(theta)
+    v = np.broadcast_to(v, (theta.shape[0], 2))
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
+
+
+class LeggedUnits:
+    """One wheel unit of type ``wheel_type`` on a leg (the class is made per wheel type by
+    :func:`legged`)."""
+
+    wheel_type: ClassVar[Any]
+    type_name: ClassVar[str]
+    angles: ClassVar[tuple[Channel, ...]]
+    currents: ClassVar[tuple[Channel, ...]]
+    coordinates: ClassVar[tuple[int, ...]]
+    platform_keys: ClassVar[tuple[str, ...]]
+    inertial_names: ClassVar[tuple[str, ...]]
+    parameter_info: ClassVar[Mapping[str, tuple[str, str]]]
+    friction_signs: ClassVar[Mapping[str, int]]
+    turning: ClassVar[str | None]
+    steering: ClassVar[str | None]
+    steering_current: ClassVar[int]
+    leg_parameters: ClassVar[dict[str, tuple[str, str]]] = {
+        "m_leg": ("kg", "mass moving with a leg's attachment point"),
+        "flv": ("N s/m", "viscous leg friction"),
+        "flc": ("N", "Coulomb leg friction"),
+    }
+
+    def __init__(self, specs: Sequence[LeggedSpec], friction_tanh_gain: float = 10.0) -> None:
+        if len(specs) != 1:
+            raise ValueError("a legged group holds one unit")
+        self.specs = tuple(specs)
+        self.spec = specs[0]
+        self.leg = self.spec.leg
+        self.names = [self.spec.name]
+        self.n_units = 1
+        self.wheel = self.wheel_type.from_specs([self.spec.wheel], friction_tanh_gain)
+        self.alpha = float(friction_tanh_gain)
+        self.n_own = len(getattr(self.wheel_type, "coordinates", ()))  # e
+        self.axis = np.asarray(self.leg.axis, float)
+        self.hip = np.asarray(self.leg.hip, float)
+
+    # ------------------------------------------------------------ declaration
+    @classmethod
+    def parse_entry(cls, entry: Mapping[str, Any], k: int, where: str,
+                    defaults: Mapping[str, float]) -> LeggedSpec:
+        """A wheel entry with ``leg:``: the wheel attached at the leg's hip."""
+        name = entry.get("name", "?")
+        at = f"{where}: 'units[{k}]' (unit '{name}')"
+        leg = parse_leg(entry, at)
+        key = cls.wheel_type.attachment_key
+        if key in entry:
+            raise InputError(f"{at}: key '{key}' with 'leg': the attachment point is hip + "
+                             f"lambda * axis; leave out '{key}'")
+        inner = {k_: v for k_, v in entry.items() if k_ != "leg"} | {key: list(leg.hip)}
+        return LeggedSpec(cls.wheel_type.parse_entry(inner, k, where, defaults), leg)
+
+    @classmethod
+    def group_key(cls, spec: LeggedSpec) -> Hashable:
+        return spec.name  # each legged unit is a group of its own
+
+    @classmethod
+    def from_specs(cls, specs: Sequence[LeggedSpec], friction_tanh_gain: float = 10.0
+                   ) -> LeggedUnits:
+        return cls(specs, friction_tanh_gain)
+
+    @classmethod
+    def friction_names(cls, units: Sequence[str], variant: FrictionVariant = "per-wheel"
+                       ) -> list[str]:
+        """The wheel type's friction names, then the legs' (``flv_<u>``, ``flc_<u>``)."""
+        names = list(cls.wheel_type.friction_names(units, variant))
+        if check_variant(variant) == "shared":
+            return names + ["flv", "flc"]
+        return names + [n for u in units for n in (f"flv_{u}", f"flc_{u}")]
+
+    @classmethod
+    def typical_parameters(cls, units: Sequence[str]) -> dict[str, float]:
+        """The wheel type's, a leg mass of 6 kg and the leg friction of a linear guide
+        (−15 N s/m, −4 N), ±10 % per unit."""
+        out = dict(cls.wheel_type.typical_parameters(units))
+        rng = np.random.default_rng(2002)
+        out["m_leg"] = 6.0
+        for u in units:
+            f = 1.0 + 0.1 * (2 * rng.random(2) - 1)
+            out |= {f"flv_{u}": -15.0 * f[0], f"flc_{u}": -4.0 * f[1]}
+        return out
+
+    def torque_constants(self) -> np.ndarray:
+        return self.wheel.torque_constants()
+
+    def initial_angles(self, twist: np.ndarray) -> np.ndarray:
+        """The wheel's, with the leg at the middle of its range (the wheel as if attached
+        there)."""
+        return np.append(self._wheel_at(self.leg.middle).initial_angles(twist), self.leg.middle)
+
+    def _wheel_at(self, extension: float) -> Any:
+        """The wheel type's group attached at the leg's point for a fixed ``extension``."""
+        return self.wheel_type.from_specs([self.spec.wheel.moved(self.leg.point(extension))],
+                                          self.alpha)
+
+    # ------------------------------------------------------------ kinematics
+    def _split(self, values: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+        if values is None:
+            return None, None
+        values = np.asarray(values, float)
+        return values[:, :-1], values[:, -1]
+
+    def kinematics(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
+                   angle_rates: np.ndarray | None = None,
+                   coordinate_rates: np.ndarray | None = None) -> LegData:
+        """The wheel's kinematics in the leg-end frame (L1) and the transforms T, Ṫ q̇ (L2),
+        A_P, Ȧ_P q̇ (L6). λ̇ is the last of ``coordinate_rates`` (the simulator's states)
+        when given, else the measured rate in ``angle_rates``."""
+        q = np.asarray(q, float)
+        qd = np.asarray(qd, float)
+        wheel_angles, lam = self._split(angles)
+        wheel_rates, lam_rate_meas = self._split(angle_rates)
+        wheel_coord, lam_rate = self._split(coordinate_rates)
+        if lam_rate is None:
+            if lam_rate_meas is None:
+                raise ValueError("a leg needs its extension rate (measured or a state)")
+            lam_rate = lam_rate_meas
+        n, e = q.shape[0], self.n_own
+        theta, omega = q[:, 2], qd[:, 2]
+        a_w = _rotate(theta, self.axis)  # â (world)
+        d_w = lam[:, None] * a_w  # R λ a
+        p_w = _rotate(theta, self.hip) + d_w  # R P
+        t = np.zeros((n, 3 + e, 4 + e))
+        t[:, 0, 0] = t[:, 1, 1] = t[:, 2, 2] = 1.0
+        t[:, :2, 2] = _turn(d_w)
+        t[:, :2, 3 + e] = a_w
+        t[:, 3:, 3:3 + e] = np.eye(e)
+        t_dot_qd = np.zeros((n, 3 + e))
+        t_dot_qd[:, :2] = (-(omega**2)[:, None] * d_w
+                           + 2.0 * (omega * lam_rate)[:, None] * _turn(a_w))  # (L2)
+        qd_l = np.einsum("nij,nj->ni", t[:, :3, :3], qd)  # (L1)
+        qd_l[:, :2] += lam_rate[:, None] * a_w
+        q_l = q.copy()
+        q_l[:, :2] += d_w
+        if e:
+            wheel = self.wheel.kinematics(q_l, qd_l, wheel_angles, wheel_rates,
+                                          coordinate_rates=wheel_coord)
+        else:
+            wheel = self.wheel.kinematics(q_l, qd_l, wheel_angles, wheel_rates)
+        a_p = np.zeros((n, 2, 4 + e))
+        a_p[:, 0, 0] = a_p[:, 1, 1] = 1.0
+        a_p[:, :, 2] = _turn(p_w)
+        a_p[:, :, 3 + e] = a_w
+        a_p_dot_qd = -(omega**2)[:, None] * p_w + 2.0 * (omega * lam_rate)[:, None] * _turn(a_w)
+        return LegData(wheel, qd, lam, lam_rate, t, t_dot_qd, a_p, a_p_dot_qd)
+
+    def _qd_full(self, data: LegData) -> np.ndarray:
+        """q̇ of the group's coordinates (N, 4 + e): base twist, own rates, λ̇."""
+        own = data.wheel.angle_rate[:, list(self.wheel_type.coordinates)] if self.n_own else (
+            np.zeros((data.qd.shape[0], 0)))
+        return np.concatenate([data.qd, own, data.lam_rate[:, None]], axis=1)
+
+    def wheel_accelerations(self, data: LegData, qdd: np.ndarray) -> np.ndarray:
+        """q̈_L (L2) of the wheel's coordinates (N, 3 + e) for the group's q̈ (N, 4 + e)."""
+        return np.einsum("nij,nj->ni", data.t, qdd) + data.t_dot_qd
+
+    def leg_kinematics(self, q: np.ndarray, qd: np.ndarray, lam: np.ndarray,
+                       lam_rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The leg-end frame's pose q_L and twist q̇_L (N, 3) (world) for base motion (q, qd)
+        and extensions λ, λ̇ (N,) (L1)."""
+        q = np.asarray(q, float)
+        qd = np.asarray(qd, float)
+        a_w = _rotate(q[:, 2], self.axis)
+        q_l = q.copy()
+        q_l[:, :2] += lam[:, None] * a_w
+        qd_l = qd.copy()
+        qd_l[:, :2] += qd[:, 2:3] * _turn(lam[:, None] * a_w) + lam_rate[:, None] * a_w
+        return q_l, qd_l
+
+    def actuator_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
+                       leg_rate: np.ndarray | None = None) -> np.ndarray:
+        """The wheel's actuator rates for the base motion with the legs moving at
+        ``leg_rate`` (N,) [m/s] (0: held), from its inverse kinematics in the leg-end frame."""
+        wheel_angles, lam = self._split(angles)
+        rate = np.zeros(lam.shape) if leg_rate is None else np.asarray(leg_rate, float)
+        q_l, qd_l = self.leg_kinematics(q, qd, lam, rate)
+        return self.wheel.actuator_rates(q_l, qd_l, wheel_angles)
+
+    def angle_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """The wheel's angle rates with the leg held; the extension's rate is a state: 0."""
+        wheel_angles, lam = self._split(angles)
+        q_l, qd_l = self.leg_kinematics(q, qd, lam, np.zeros(lam.shape))
+        rates = self.wheel.angle_rates(q_l, qd_l, wheel_angles)
+        return np.concatenate([rates, np.zeros((rates.shape[0], 1))], axis=1)
+
+    def normal_equations(self, angles: np.ndarray, increments: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """AᵀA (N, 3, 3), Aᵀb (N, 3) of the wheel's rows moved to the base twist: ν_L =
+        Tᵦ ν + (Δλ a, 0) (module docstring, "Odometry")."""
+        wheel_angles, lam = self._split(angles)
+        wheel_inc, lam_inc = self._split(increments)
+        ata, atb = self.wheel.normal_equations(wheel_angles, wheel_inc)
+        n = lam.shape[0]
+        tb = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        tb[:, :2, 2] = _turn(lam[:, None] * self.axis)
+        shift = np.zeros((n, 3))
+        shift[:, :2] = lam_inc[:, None] * self.axis
+        atb = atb - np.einsum("nij,nj->ni", ata, shift)
+        return (np.einsum("nji,njk,nkl->nil", tb, ata, tb), np.einsum("nji,nj->ni", tb, atb))
+
+    # ------------------------------------------------------------ dynamics
+    def mass_terms(self, data: LegData, params: Mapping[str, float]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """(M_add, b_dir) over (q_b, own, λ) (L3, L6)."""
+        m_l, b_l = self.wheel.mass_terms(data.wheel, params)
+        m = np.einsum("nri,nrs,nsj->nij", data.t, m_l, data.t)
+        b = np.einsum("nri,nr->ni", data.t, b_l - np.einsum("nrs,ns->nr", m_l, data.t_dot_qd))
+        m_leg = float(params["m_leg"])
+        m = m + m_leg * np.einsum("nri,nrj->nij", data.a_p, data.a_p)
+        b = b - m_leg * np.einsum("nri,nr->ni", data.a_p, data.a_p_dot_qd)
+        return m, b
+
+    def a_id(self, data: LegData, qdd: np.ndarray) -> np.ndarray:
+        """Columns of A_ID for the wheel type's inertial parameters and m_leg: Tᵀ A_ID,L at
+        q̈_L (L2, L3), and A_Pᵀ (A_P q̈ + Ȧ_P q̇) (L6); (N, 4 + e, p + 1)."""
+        cols = self.wheel.a_id(data.wheel, self.wheel_accelerations(data, qdd))
+        wheel = np.einsum("nri,nrp->nip", data.t, cols)
+        acc = np.einsum("nri,ni->nr", data.a_p, qdd) + data.a_p_dot_qd
+        leg = np.einsum("nri,nr->ni", data.a_p, acc)
+        return np.concatenate([wheel, leg[..., None]], axis=2)
+
+    def _leg_coefficients(self, params: Mapping[str, float]) -> tuple[float, float]:
+        u = self.spec.name
+        return (float(params.get(f"flv_{u}", params.get("flv", 0.0))),
+                float(params.get(f"flc_{u}", params.get("flc", 0.0))))
+
+    def friction_torques(self, data: LegData, params: Mapping[str, float],
+                         variant: FrictionVariant = "per-wheel") -> np.ndarray:
+        return self.wheel.friction_torques(data.wheel, params, variant)
+
+    def friction_force(self, data: LegData, params: Mapping[str, float],
+                       variant: FrictionVariant = "per-wheel") -> np.ndarray:
+        """The wheel's generalized friction force moved by Tᵀ, and the leg's friction
+        f_lv λ̇ + f_lc tanh(α λ̇) on its row; (N, 4 + e)."""
+        n = data.lam.shape[0]
+        f_l = self.wheel.friction_force(data.wheel, params, variant)
+        out = np.zeros((n, 4 + self.n_own))
+        if f_l is not None:
+            f_l = np.asarray(f_l, float)
+            full = np.zeros((n, 3 + self.n_own))
+            full[:, :f_l.shape[1]] = f_l
+            out += np.einsum("nri,nr->ni", data.t, full)
+        fv, fc = self._leg_coefficients(params)
+        out[:, -1] += fv * data.lam_rate + fc * np.tanh(self.alpha * data.lam_rate)
+        return out
+
+    def friction_columns(self, data: LegData, variant: FrictionVariant = "per-wheel",
+                         out: np.ndarray | None = None) -> np.ndarray:
+        """The wheel's columns moved by Tᵀ, then the leg's −[λ̇, tanh(α λ̇)] on its row."""
+        cols = self.wheel.friction_columns(data.wheel, variant)
+        wheel = np.einsum("nri,nrp->nip", data.t, cols)
+        n = data.lam.shape[0]
+        leg = np.zeros((n, 4 + self.n_own, 2))
+        leg[:, -1, 0] = -data.lam_rate
+        leg[:, -1, 1] = -np.tanh(self.alpha * data.lam_rate)
+        res = np.concatenate([wheel, leg], axis=2)
+        if out is not None:
+            out[...] = res
+            return out
+        return res
+
+    def kinetic_energy(self, data: LegData, params: Mapping[str, float]) -> np.ndarray:
+        """The wheel's kinetic energy (in L, its own) plus ½ m_leg |v_P|² [J]; (N,)."""
+        v_p = np.einsum("nri,ni->nr", data.a_p, self._qd_full(data))
+        return (self.wheel.kinetic_energy(data.wheel, params)
+                + 0.5 * float(params["m_leg"]) * (v_p**2).sum(axis=1))
+
+    # ------------------------------------------------------------ planning
+    def predict_angles(self, t: np.ndarray, twists: np.ndarray,
+                       initial: np.ndarray | None = None,
+                       legs: np.ndarray | None = None) -> AnglePrediction:
+        """The wheel's planned angles along base-frame twists (…, N, 3) with the leg at
+        ``legs`` (…, N) [m] (held at the middle of its range when not given): the wheel's
+        planning for the leg-end frame's twist (L1, in the base frame), its attachment
+        point at the leg's mean extension; the extension appended."""
+        tw, lead = series(twists)
+        lam = self._leg_series(t, tw, legs)
+        lam_rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+        tw_l = tw.copy()
+        d = lam[..., None] * self.axis
+        tw_l[..., :2] += tw[..., 2:3] * _turn(d - self.leg.middle * self.axis)
+        tw_l[..., :2] += lam_rate[..., None] * self.axis
+        wheel_init = None if initial is None else np.asarray(initial, float)[..., :-1]
+        pred = self._wheel_at(self.leg.middle).predict_angles(t, tw_l, wheel_init)
+        ang = np.concatenate([pred.angles.reshape(*tw.shape[:2], -1), lam[..., None]], axis=-1)
+        rates = np.concatenate([pred.rates.reshape(*tw.shape[:2], -1), lam_rate[..., None]],
+                               axis=-1)
+        return AnglePrediction(ang.reshape(*lead, *ang.shape[1:]),
+                               rates.reshape(*lead, *rates.shape[1:]),
+                               pred.actuator, pred.turning, pred.flags, pred.lag)
+
+    def _leg_series(self, t: np.ndarray, tw: np.ndarray, legs: np.ndarray | None
+                    ) -> np.ndarray:
+        if legs is None:
+            return np.full(tw.shape[:2], self.leg.middle)
+        return np.broadcast_to(np.asarray(legs, float).reshape(-1, tw.shape[1]),
+                               tw.shape[:2]).copy()
+
+    def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray, twist_rates: np.ndarray
+                            ) -> AnglePrediction:
+        """The wheel's, with the leg at the middle of its range."""
+        pred = self._wheel_at(self.leg.middle).quasi_steady_angles(t, twists, twist_rates)
+        lam = np.full(pred.angles.shape[:-1] + (1,), self.leg.middle)
+        return AnglePrediction(np.concatenate([pred.angles, lam], axis=-1),
+                               np.concatenate([pred.rates, 0.0 * lam], axis=-1),
+                               pred.actuator, pred.turning, pred.flags, pred.lag)
+
+    # ------------------------------------------------------------ report / inspect
+    def unit_table(self) -> list[dict[str, float | str]]:
+        rows = self.wheel.unit_table()
+        for r in rows:
+            r["type"] = self.type_name
+            r.pop("x [m]", None)
+            r.pop("y [m]", None)
+            r |= {"hip x [m]": self.leg.hip[0], "hip y [m]": self.leg.hip[1],
+                  "leg axis [deg]": float(np.degrees(np.arctan2(self.axis[1], self.axis[0]))),
+                  "leg range [m]": f"{self.leg.range[0]:g}–{self.leg.range[1]:g}"}
+        return rows
+
+    def quantities(self, data: LegData, q_fit: np.ndarray | None = None
+                   ) -> dict[str, tuple[str, np.ndarray]]:
+        """The wheel's signals (slip against the leg-end frame's twist) and the leg's
+        extension and rate."""
+        q_fit_l = None
+        if q_fit is not None:
+            q_fit_l = np.einsum("nij,nj->ni", data.t[:, :3, :3], q_fit)
+            q_fit_l[:, :2] += data.lam_rate[:, None] * data.t[:, :2, 3 + self.n_own]
+        out = dict(self.wheel.quantities(data.wheel, q_fit_l))
+        out["leg extension"] = ("m", data.lam[:, None])
+        out["leg rate"] = ("m/s", data.lam_rate[:, None])
+        return out
+
+
+def legged(wheel_type: Any) -> type[LeggedUnits]:
+    """The unit type ``<type>+leg``: ``wheel_type`` on a leg."""
+    attrs: dict[str, Any] = {
+        "wheel_type": wheel_type,
+        "type_name": f"{wheel_type.type_name}+leg",
+        "angles": (*wheel_type.angles, LEG_CHANNEL),
+        "currents": wheel_type.currents,
+        "coordinates": (*getattr(wheel_type, "coordinates", ()), len(wheel_type.angles)),
+        "platform_keys": wheel_type.platform_keys,
+        "inertial_names": (*wheel_type.inertial_names, "m_leg"),
+        "parameter_info": {**wheel_type.parameter_info, **LeggedUnits.leg_parameters},
+        "friction_signs": {**wheel_type.friction_signs, "flv": -1, "flc": -1},
+        "turning": wheel_type.turning,
+        "steering": wheel_type.steering,
+        "steering_current": getattr(wheel_type, "steering_current", 0),
+    }
+    bases: tuple[type, ...] = (LeggedUnits,)
+    if hasattr(wheel_type, "constraint_jacobian"):
+        bases = (_Constrained, LeggedUnits)
+    if hasattr(wheel_type, "controller_setpoints"):
+        bases = (_Positioned, *bases)
+    return type(f"Legged{wheel_type.__name__}", bases, attrs)
+
+
+class _Constrained:
+    """A legged wheel whose type keeps constraint rows (the steered wheel's lateral no-slip)."""
+
+    def constraint_jacobian(self: Any, data: LegData) -> tuple[np.ndarray, np.ndarray]:
+        """G = G_L T, Ġ q̇ = Ġ_L q̇_L + G_L Ṫ q̇ (L4)."""
+        g_l, g_dot = self.wheel.constraint_jacobian(data.wheel)
+        g = np.einsum("ncr,nri->nci", g_l, data.t)
+        return g, g_dot + np.einsum("ncr,nr->nc", g_l, data.t_dot_qd)
+
+
+class _Positioned:
+    """A legged wheel whose type has position-controlled joints (the steered wheel's
+    steering): its setpoints for the leg-end frame's twist."""
+
+    def controller_setpoints(self: Any, twist: np.ndarray, twist_rate: np.ndarray,
+                             angles: np.ndarray, plan: tuple[np.ndarray, ...] | None = None,
+                             leg_rate: np.ndarray | None = None,
+                             leg_acc: np.ndarray | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
+        """The wheel's setpoints (001 eqs. 24–25) for the leg-end frame's base-frame twist
+        ν_L = Tᵦ ν + (λ̇ a, 0) (L1) and its rate, the legs moving at ``leg_rate`` (N,)."""
+        wheel_angles, lam = self._split(angles)
+        rate = np.zeros(lam.shape) if leg_rate is None else np.asarray(leg_rate, float)
+        acc = np.zeros(lam.shape) if leg_acc is None else np.asarray(leg_acc, float)
+        d = lam[:, None] * self.axis
+        tw = np.array(twist, float)
+        tw[:, :2] += twist[:, 2:3] * _turn(d) + rate[:, None] * self.axis
+        twd = np.array(twist_rate, float)
+        twd[:, :2] += (twist_rate[:, 2:3] * _turn(d) + twist[:, 2:3] * rate[:, None]
+                       * _turn(self.axis) + acc[:, None] * self.axis)
+        return self.wheel.controller_setpoints(tw, twd, wheel_angles, plan)

@@ -1,0 +1,286 @@
+"""Wheels on movable legs (002), checked independently of their derivation (L1–L6 of
+:mod:`ropod_sysid.model.units.legs`): 002's constraint rows (17) by hand, its eq. (18) corrected,
+the constant-leg reduction to the fixed-attachment model, Kane's method with finite-difference
+partial velocities, virtual power, energy while the legs slide, and the platform entry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ropod_sysid.errors import InputError
+from ropod_sysid.model import PlatformModel
+from ropod_sysid.params import Parameters, parameter_names
+from ropod_sysid.platform import platform_from_dict
+from ropod_sysid.simulate import derivatives, rk4_step
+
+R = 0.1
+SETTINGS = {"name": "justin", "wheel_radius": R, "torque_constant": 2.0,
+            "steer_torque_constant": 10.0, "friction_tanh_gain": 100.0}
+CORNERS = (("1", 1, 1), ("2", -1, 1), ("3", -1, -1), ("4", 1, -1))
+S2 = float(np.sqrt(0.5))
+
+
+def justin(hip: float = 0.1, wheel: str = "steered", **extra: object) -> dict:
+    """Four wheels of type ``wheel`` on legs along the diagonals from hips at (±hip, ±hip)."""
+    units = []
+    for n, sx, sy in CORNERS:
+        u = {"name": n, "type": wheel, "leg": {"hip": [sx * hip, sy * hip],
+                                               "axis": [sx * S2, sy * S2],
+                                               "range": [0.37, 0.56]}}
+        units.append(u | extra)
+    return SETTINGS | {"units": units}
+
+
+TRUTH = {"m_b": 120.0, "Jzz_b": 9.0, "Jst": 0.12, "Jrot_s": 0.02, "m_leg": 6.0}
+LEG_COLS = np.array([2, 5, 8, 11])  # the leg_u channels among the angles
+LEG_ROWS = np.array([4, 6, 8, 10])  # λ_u among the generalized coordinates
+
+
+def random_state(model: PlatformModel, rng: np.random.Generator, n: int = 4
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    q = rng.normal(size=(n, 3))
+    qd = rng.normal(size=(n, model.n_dof))
+    angles = rng.uniform(-np.pi, np.pi, size=(n, model.layout.n_angles))
+    legs = np.array([g.angles[-1] for g, _ in model.groups])
+    angles[:, legs] = rng.uniform(0.37, 0.56, size=(n, legs.size))
+    return q, qd, angles
+
+
+def test_platform_entry_round_trip_and_errors() -> None:
+    plat = platform_from_dict(justin(), "<p>")
+    assert plat.types == ["steered+leg"]
+    assert plat.layout.angle_names[:3] == ("steer_1", "phi_1", "leg_1")
+    names = parameter_names(plat)
+    assert names[:5] == ["m_b", "Jzz_b", "Jst", "Jrot_s", "m_leg"]
+    assert names[-2:] == ["flv_4", "flc_4"]
+    d = plat.to_dict()
+    assert d["units"][0]["type"] == "steered" and "position" not in d["units"][0]
+    assert platform_from_dict(d, "<again>") == plat
+    bad = justin()
+    bad["units"][0]["position"] = [0.1, 0.1]
+    with pytest.raises(InputError, match=r"^<p>: 'units\[0\]' \(unit '1'\): key 'position' "
+                       r"with 'leg': the attachment point is hip \+ lambda \* axis; leave out "
+                       r"'position'$"):
+        platform_from_dict(bad, "<p>")
+    bad = justin()
+    bad["units"][1]["leg"]["axis"] = [1.0, 1.0]
+    with pytest.raises(InputError, match=r"'leg.axis' has length 1.414; give a unit vector "
+                       r"\(e.g. \[0.7071, 0.7071\]\)$"):
+        platform_from_dict(bad, "<p>")
+    bad = justin()
+    bad["units"][2]["leg"]["range"] = [0.5, 0.4]
+    with pytest.raises(InputError, match=r"'leg.range' is \[0.5, 0.4\]; give \[lmin, lmax\]"):
+        platform_from_dict(bad, "<p>")
+
+
+def test_constraint_rows_are_002_eq_17_and_eq_18_needs_its_factors() -> None:
+    """At hip 0 and axis (cos α, sin α) each lateral row is 002 (17): [−sin(θ+β), cos(θ+β),
+    Δ, Γ] on (x, y, θ, λ) with Δ = λ cos(α − β), Γ = sin(α − β), and nothing on β. The
+    steering angle of (18) with the cos α / sin α factors of (12) satisfies it; as printed
+    (λθ̇ without them) it does not."""
+    model = PlatformModel(platform_from_dict(justin(hip=0.0), "<p>"))
+    rng = np.random.default_rng(17)
+    q, qd, angles = random_state(model, rng)
+    st = model.state(q, qd, angles)
+    g, _ = model.constraints(st, exact=True)
+    alpha = np.array([np.pi / 4, 3 * np.pi / 4, -3 * np.pi / 4, -np.pi / 4])
+    beta, lam = angles[:, [0, 3, 6, 9]], angles[:, LEG_COLS]
+    th = q[:, 2:3]
+    assert np.allclose(g[:, :, 0], -np.sin(th + beta), atol=1e-14)
+    assert np.allclose(g[:, :, 1], np.cos(th + beta), atol=1e-14)
+    assert np.allclose(g[:, :, 2], lam * np.cos(alpha - beta), atol=1e-14)
+    for i, row in enumerate(LEG_ROWS):
+        assert np.allclose(g[:, i, row], np.sin(alpha[i] - beta[:, i]), atol=1e-14)
+        others = np.setdiff1d(np.arange(3, model.n_dof), [row])
+        assert np.abs(g[:, i, others]).max() < 1e-14
+    # (18): world twist and leg rates → steering angle
+    xd, yd, w = qd[:, 0:1], qd[:, 1:2], qd[:, 2:3]
+    lam_d = qd[:, LEG_ROWS]
+    vx = np.cos(th) * xd + np.sin(th) * yd
+    vy = -np.sin(th) * xd + np.cos(th) * yd
+    fixed = np.arctan2(vy + lam * np.cos(alpha) * w + np.sin(alpha) * lam_d,
+                       vx - lam * np.sin(alpha) * w + np.cos(alpha) * lam_d)
+    printed = np.arctan2(vy + lam * w + np.sin(alpha) * lam_d,
+                         vx - lam * w + np.cos(alpha) * lam_d)
+
+    def lateral(b: np.ndarray) -> np.ndarray:
+        return (-np.sin(th + b) * xd + np.cos(th + b) * yd + lam * np.cos(alpha - b) * w
+                + np.sin(alpha - b) * lam_d)
+
+    assert np.abs(lateral(fixed)).max() < 1e-12
+    assert np.abs(lateral(printed)).min() > 1e-3
+
+
+def test_a_constant_leg_is_the_fixed_attachment_model() -> None:
+    """With every leg held (λ̇ = 0) at one extension the legged model restricted to (q_b, β)
+    is the fixed steered platform at P = hip + λ a whose base carries the four leg masses
+    (m_b + 4 m_leg, J_zz,b + m_leg Σ|P|²: the points are symmetric), to 1e-12: M_dir, b_dir,
+    B_τ, the constraints, the identification columns and the kinetic energy."""
+    lam = 0.43
+    legged = PlatformModel(platform_from_dict(justin(), "<legs>"))
+    pts = [[sx * (0.1 + lam * S2), sy * (0.1 + lam * S2)] for _, sx, sy in CORNERS]
+    fixed = PlatformModel(platform_from_dict(SETTINGS | {"units": [
+        {"name": n, "type": "steered", "position": p}
+        for (n, _, _), p in zip(CORNERS, pts, strict=True)]}, "<fixed>"))
+    rng = np.random.default_rng(5)
+    q, qd, angles = random_state(legged, rng)
+    angles[:, LEG_COLS] = lam
+    qd[:, LEG_ROWS] = 0.0
+    keep_rows = np.array([0, 1, 2, 3, 5, 7, 9])
+    keep_ang = np.setdiff1d(np.arange(12), LEG_COLS)
+    friction = {f"{f}_{u}": -0.3 * (i + 1) for i, f in enumerate(("fdv", "fdc", "fsv", "fsc"))
+                for u in "1234"}
+    sum_p2 = float(np.sum(np.square(pts)))
+    p_legs = Parameters(TRUTH | friction)
+    p_fixed = Parameters({**TRUTH, "m_b": TRUTH["m_b"] + 4 * TRUTH["m_leg"],
+                          "Jzz_b": TRUTH["Jzz_b"] + TRUTH["m_leg"] * sum_p2} | friction)
+    st_l = legged.state(q, qd, angles)
+    st_f = fixed.state(q, qd[:, keep_rows], angles[:, keep_ang])
+    e_l, e_f = legged.direct_eom(st_l, p_legs), fixed.direct_eom(st_f, p_fixed)
+    ix = np.ix_(np.arange(4), keep_rows, keep_rows)
+    assert np.abs(e_l.m_dir[ix] - e_f.m_dir).max() < 1e-12
+    assert np.abs(e_l.b_dir[:, keep_rows] - e_f.b_dir).max() < 1e-12
+    assert np.abs(e_l.b_tau[:, keep_rows] - e_f.b_tau).max() < 1e-12
+    assert np.abs(e_l.tau_f - e_f.tau_f).max() < 1e-12
+    g_l, c_l = legged.constraints(st_l, exact=True)
+    g_f, c_f = fixed.constraints(st_f, exact=True)
+    assert np.abs(g_l[:, :, keep_rows] - g_f).max() < 1e-12
+    assert np.abs(c_l - c_f).max() < 1e-12
+    assert np.allclose(legged.kinetic_energy(st_l, p_legs), fixed.kinetic_energy(st_f, p_fixed),
+                       rtol=1e-13)
+    qdd = rng.normal(size=qd.shape)
+    qdd[:, LEG_ROWS] = 0.0
+    lhs_l = np.einsum("nij,nj->ni", e_l.m_dir, qdd) - e_l.b_dir
+    lhs_f = np.einsum("nij,nj->ni", e_f.m_dir, qdd[:, keep_rows]) - e_f.b_dir
+    assert np.abs(lhs_l[:, keep_rows] - lhs_f).max() < 1e-12
+
+
+@pytest.mark.parametrize("wheel", ["steered", "swivel", "omni"])
+def test_regressor_is_linear_in_the_parameters(wheel: str) -> None:
+    """A_ID,ext m = P (M_dir q̈ − b_dir − f_f − B_τ τ_f) at random states, for every wheel
+    type on legs: the identification columns (Tᵀ A_ID,L, the leg's mass and friction) are
+    those of the equations of motion."""
+    extra = {"heading": 0.4} if wheel == "omni" else {}
+    settings = {"wheel_distance": 0.08, "caster_offset": 0.02, "hub_com_offset": -0.005}
+    model = PlatformModel(platform_from_dict(justin(wheel=wheel, **extra) | settings, "<p>"))
+    rng = np.random.default_rng(7)
+    n = 5
+    q = rng.normal(size=(n, 3))
+    qd = rng.normal(size=(n, model.n_dof))
+    angles = rng.uniform(-np.pi, np.pi, size=(n, model.layout.n_angles))
+    leg = np.array([g.angles[-1] for g, _ in model.groups])
+    angles[:, leg] = rng.uniform(0.37, 0.56, size=(n, 4))
+    rates = rng.normal(size=angles.shape)
+    names = model.parameter_names()
+    values = {nm: rng.uniform(0.05, 2.0) * (-1 if nm[0] == "f" else 1) for nm in names}
+    params = Parameters(values)
+    st = model.state(q, qd[:, :3], angles, rates)
+    qdd = rng.normal(size=(n, model.n_dof))
+    eom = model.direct_eom(st, params)
+    need = (np.einsum("nij,nj->ni", eom.m_dir, qdd) - eom.b_dir
+            - np.einsum("nca,na->nc", eom.b_tau, eom.tau_f))
+    if eom.f_f is not None:
+        need = need - eom.f_f
+    proj = model.identification_projector(st)
+    if proj is not None:
+        need = np.einsum("nij,nj->ni", proj, need)
+    a = model.a_id_ext(st, qdd)
+    assert np.allclose(np.einsum("ndp,p->nd", a, params.vector(names)), need, atol=1e-10)
+
+
+@pytest.mark.parametrize("wheel", ["steered", "omni"])
+def test_kane_equations_and_virtual_power_equal_the_model(wheel: str) -> None:
+    """Kane's method from the bodies' speeds alone: the base (ṙ, θ̇), each leg's point mass at
+    r + R(hip + λ a) (its velocity ṙ + θ̇ S R P + λ̇ R a), each unit's turn θ̇ + β̇ and its
+    wheel's spin t·v_P / r. Partial velocities by finite differences in q̇, accelerations by central
+    differences in time: the generalized inertia forces equal M_dir q̈ − b_dir (L3, L6);
+    virtual power gives B_τ."""
+    extra = {"heading": 0.4} if wheel == "omni" else {}
+    model = PlatformModel(platform_from_dict(justin(wheel=wheel, **extra), "<p>"))
+    rng, h = np.random.default_rng(11), 1e-5
+    params = TRUTH | {"Jrot_o": 0.004}
+    q, qd, angles = random_state(model, rng, 3)
+    qdd = rng.normal(size=qd.shape)
+
+    def speeds(q: np.ndarray, qd: np.ndarray, ang: np.ndarray) -> tuple[np.ndarray, ...]:
+        out = [qd[:, 0], qd[:, 1], qd[:, 2]]
+        inertia = [params["m_b"], params["m_b"], params["Jzz_b"]]
+        for (g, unit), rows in zip(model.groups, model.rows, strict=True):
+            lam = ang[:, g.angles[-1]]  # ṙ + θ̇ S R P + λ̇ R a of the point r + R P
+            lam_rate = qd[:, rows[-1]]
+            p = unit.leg.point(lam)  # type: ignore[attr-defined]
+            a = np.broadcast_to(unit.leg.axis, p.shape)  # type: ignore[attr-defined]
+            c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+            rp = np.stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]], axis=-1)
+            ra = np.stack([c * a[:, 0] - s * a[:, 1], s * a[:, 0] + c * a[:, 1]], axis=-1)
+            vel = (qd[:, :2] + qd[:, 2:3] * np.stack([-rp[:, 1], rp[:, 0]], axis=-1)
+                   + lam_rate[:, None] * ra)
+            out += [vel[:, 0], vel[:, 1]]
+            inertia += [params["m_leg"]] * 2
+            a = ang[:, g.angles]
+            if wheel == "steered":
+                psi = q[:, 2] + a[:, 0]
+                out.append(qd[:, 2] + qd[:, rows[3]])
+                inertia.append(params["Jst"])
+                jr = params["Jrot_s"]
+            else:
+                psi = q[:, 2] + 0.4
+                jr = params["Jrot_o"]
+            out.append((np.cos(psi) * vel[:, 0] + np.sin(psi) * vel[:, 1]) / R)
+            inertia.append(jr)
+        return np.stack(out, axis=-1), np.array(inertia)
+
+    sp, inertia = speeds(q, qd, angles)
+    partial = np.stack([speeds(q, qd + 1e-3 * np.eye(model.n_dof)[r], angles)[0] - sp
+                        for r in range(model.n_dof)], axis=1) / 1e-3
+    q_f, ang_f = advanced(model, q, qd, angles, h)
+    q_b, ang_b = advanced(model, q, qd, angles, -h)
+    acc = (speeds(q_f, qd + h * qdd, ang_f)[0] - speeds(q_b, qd - h * qdd, ang_b)[0]) / (2 * h)
+    kane = np.einsum("nrs,s,ns->nr", partial, inertia, acc)
+    st = model.state(q, qd, angles)
+    eom = model.direct_eom(st, params, "per-wheel")
+    model_side = np.einsum("nij,nj->ni", eom.m_dir, qdd) - eom.b_dir
+    assert np.allclose(kane, model_side, rtol=1e-6, atol=1e-6), wheel
+    tau = rng.normal(size=(3, model.layout.n_currents))
+    power = (tau * st.actuator_rate).sum(axis=1)
+    assert np.allclose(np.einsum("nda,na,nd->n", st.b_tau, tau, qd), power)
+
+
+def advanced(model: PlatformModel, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
+             h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pose and angles moved along q̇ for a time h (own coordinates with their rates)."""
+    ang = angles.copy()
+    ang[:, model.coordinate_channels] += h * qd[:, 3:]
+    return q + h * qd[:, :3], ang
+
+
+def test_energy_is_conserved_while_the_legs_slide() -> None:
+    """No torque, no friction: the platform coasting with its legs sliding (q̇ in the null
+    space of the constraints, every λ̇ ≠ 0) keeps its kinetic energy (RK4, 1 ms, 0.5 s) and
+    its constraints, and the legs do move."""
+    model = PlatformModel(platform_from_dict(justin(), "<p>"))
+    params = Parameters(TRUTH)
+    rng = np.random.default_rng(2)
+    q = np.zeros((1, 3))
+    angles = np.array([[0.3, 0.0, 0.45, 2.0, 0.0, 0.5, -2.2, 0.0, 0.4, -0.6, 0.0, 0.5]])
+    st = model.state(q, np.zeros((1, model.n_dof)), angles)
+    g, _ = model.constraints(st, exact=True)
+    _, _, vt = np.linalg.svd(g[0])
+    null = vt[g.shape[1]:]
+    qd = (null.T @ rng.normal(size=null.shape[0]))[None]
+    qd *= 0.3 / np.abs(qd[:, LEG_ROWS]).min()  # legs at 0.3 m/s or faster
+    tau = np.zeros((1, model.layout.n_currents))
+    e0 = model.kinetic_energy(model.state(q, qd, angles), params)[0]
+    lam0 = angles[0, LEG_COLS].copy()
+    worst = 0.0
+    for _ in range(500):
+        q, qd, angles = rk4_step(
+            lambda *y: derivatives(model, params, "per-wheel", *y[:3], y[3]),
+            (q, qd, angles), 1e-3, (tau,) * 4)
+        g, _ = model.constraints(model.state(q, qd, angles), exact=True)
+        worst = max(worst, float(np.abs(np.einsum("ncd,nd->nc", g, qd)).max()))
+    e1 = model.kinetic_energy(model.state(q, qd, angles), params)[0]
+    assert abs(e1 - e0) < 1e-7 * e0
+    assert worst < 1e-7
+    assert np.abs(angles[0, LEG_COLS] - lam0).min() > 0.01
