@@ -19,6 +19,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io import LOG_SUFFIXES, write_log
 from ropod_sysid.io.csvlog import read_numeric_table
 from ropod_sysid.io.paramfile import read_parameters, read_truth_parameters
+from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.simulate import (
@@ -168,7 +169,8 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     if control == "model" and control_params_path is not None:
         model_control = ModelControl(control_parameters(control_params_path, platform),
                                      model_kd, model_ki)
-    setpoints = read_trajectory_csv(traj_path).to_setpoints()
+    setpoints = read_trajectory_csv(traj_path,
+                                    PlatformModel(platform).planned_columns).to_setpoints()
     force = None
     if force_path is not None:
         fc = read_numeric_table(force_path, ["t", "F_bx", "F_by", "T_bz"])

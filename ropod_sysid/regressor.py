@@ -467,10 +467,13 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
     controller reset), which the friction model, zero at zero rate, cannot explain; a zero row
     holds for any parameters, so the rows' filter mixes nothing false into its neighbours.
     A unit's own rows (a steered wheel's steering) are zero likewise while its joint is held,
-    its measured rate below :data:`HELD_RATE` / friction_tanh_gain.
+    its measured rate below :data:`HELD_RATE` / friction_tanh_gain. With constraints the
+    rates and accelerations are first moved onto the allowed motions
+    (:meth:`PlatformModel.consistent_motion`).
     """
     st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
-    a = model.a_id_ext(st, pre.qdd, friction)
+    st, qdd = model.consistent_motion(st, pre.qdd)  # (unchanged without constraints)
+    a = model.a_id_ext(st, qdd, friction)
     b = model.b_id(st, pre.tau)  # b_ID = B_τ τ (eq. 35), per node delay if τ has them
     rest = at_rest(pre)
     if rest.any():

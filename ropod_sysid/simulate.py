@@ -33,12 +33,23 @@ from ropod_sysid.progress import Progress
 
 @dataclass(frozen=True)
 class Setpoints:
-    """Base-twist setpoints in the base frame: t [s], vx, vy [m/s], omega [rad/s]; (M,) each."""
+    """Base-twist setpoints in the base frame: t [s], vx, vy [m/s], omega [rad/s]; (M,) each;
+    ``planned``: setpoints of own coordinates a run plans besides, by log column (a leg's
+    extension ``leg_u`` [m]; :attr:`PlatformModel.planned_columns`)."""
 
     t: np.ndarray
     vx: np.ndarray
     vy: np.ndarray
     omega: np.ndarray
+    planned: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def planned_at(self, t: np.ndarray | float, columns: Sequence[str]) -> np.ndarray:
+        """The planned coordinates ``columns`` (…, L) at t, interpolated linearly and held
+        beyond the ends; NaN for a column not planned."""
+        t = np.asarray(t, float)
+        out = [np.interp(t, self.t, self.planned[c]) if c in self.planned
+               else np.full(t.shape, np.nan) for c in columns]
+        return np.stack(out, axis=-1) if out else np.zeros((*t.shape, 0))
 
     def at(self, t: np.ndarray | float) -> np.ndarray:
         """Linearly interpolated setpoint (…, 3); zero outside [t0, t_end]."""
@@ -217,6 +228,10 @@ def simulate(platform: Platform, params: DynamicParameters,
         raise InputError(f"engine {engine!r}: use {', '.join(ENGINES)}")
     if control is not None:
         control.check()
+        if PlatformModel(platform).planned_columns:
+            raise InputError(f"{platform.source}: the model-based control law does not plan "
+                             "legs; use the decentralised controllers (leave out --control "
+                             "model)")
         if engine == "numba":
             raise InputError("engine 'numba': the compiled loop has the decentralised "
                              "controllers only; use engine 'numpy' (or 'auto') with the "
@@ -241,6 +256,10 @@ def simulate(platform: Platform, params: DynamicParameters,
         ang0 = np.zeros((n_runs, n_ang))
     else:
         ang0 = np.broadcast_to(np.asarray(initial, float), (n_runs, n_ang)).copy()
+    columns = model.planned_columns  # legs: each run starts at its planned extension
+    first = np.stack([r.planned_at(r.t[0], columns) for r in runs]).reshape(n_runs, -1)
+    ang0[:, model.planned_angles] = np.where(np.isfinite(first), first,
+                                             ang0[:, model.planned_angles])
 
     n_dof = model.n_dof
     q = np.zeros((n_runs, 3))
@@ -282,7 +301,8 @@ def simulate(platform: Platform, params: DynamicParameters,
         else:
             kp, ki, limit = None, None, None
             # planned angles of position-controlled joints (steering), on the step grid
-            plans = model.plans(grid[:, 0] - t0[0], np.swapaxes(sp_all, 0, 1))
+            planned = np.stack([r.planned_at(grid[:, k], columns) for k, r in enumerate(runs)])
+            plans = model.plans(grid[:, 0] - t0[0], np.swapaxes(sp_all, 0, 1), planned)
             law, desired = None, None
             if control is not None:
                 _, angle_err = model.setpoints(q, sp_all[0], sp_rate[0], angles, plans, 0)
@@ -407,9 +427,11 @@ def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,
         t_log = t + jit
         t_log[1:] = np.maximum(t_log[1:], t_log[:-1] + 1e-6)
         angles = _interp_rows(t_log, t, angles)
-    if sensors.encoder_counts:
+    if sensors.encoder_counts:  # the angle encoders (a leg's extension is not an angle)
         step = 2 * np.pi / sensors.encoder_counts
-        angles = np.round(angles / step) * step
+        rad = np.array([c.unit == "rad" for c in platform.layout.angle_channels], bool)
+        angles = np.array(angles)
+        angles[:, rad] = np.round(angles[:, rad] / step) * step
     current = res.tau / platform.torque_constants()
     if sensors.current_noise > 0:
         current = current + rng.normal(0.0, sensors.current_noise, size=current.shape)

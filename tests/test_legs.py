@@ -52,7 +52,7 @@ def test_platform_entry_round_trip_and_errors() -> None:
     assert plat.types == ["steered+leg"]
     assert plat.layout.angle_names[:3] == ("steer_1", "phi_1", "leg_1")
     names = parameter_names(plat)
-    assert names[:5] == ["m_b", "Jzz_b", "Jst", "Jrot_s", "m_leg"]
+    assert names[:5] == ["m_b", "Jzz_b", "m_leg", "Jst", "Jrot_s"]
     assert names[-2:] == ["flv_4", "flc_4"]
     d = plat.to_dict()
     assert d["units"][0]["type"] == "steered" and "position" not in d["units"][0]

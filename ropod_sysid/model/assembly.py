@@ -313,6 +313,32 @@ class PlatformModel:
             self._motion_rank = int(np.sum(sv > RANK_TOLERANCE * sv[:, :1], axis=1).max())
         return self._motion_rank
 
+    def consistent_motion(self, st: State, qdd: np.ndarray) -> tuple[State, np.ndarray]:
+        """Measured rates and accelerations moved onto the motions the constraints allow:
+        q̇ ← P q̇ and q̈ ← q̈ − G⁺ (G q̈ + Ġ q̇) (the least change; G at its consistent rank,
+        :meth:`constraints`), where the rows are regular (:meth:`singular_ratio` at least
+        :data:`SINGULAR_MARGIN`; elsewhere unchanged). The model's lumps — a centred wheel's
+        spin inertia acting as a point mass at its centre — are then exact in the rows, so
+        the fit's rank analysis names them; with the smoothed measurements' small violations
+        they were only nearly collinear. Unchanged without constraints."""
+        con = self.constraints(st)
+        if con is None:
+            return st, qdd
+        g, _ = con
+        regular = base_singular_ratio(g, self.motion_rank) >= SINGULAR_MARGIN
+        qd = np.concatenate([st.qd, self.own_rates(st)], axis=1)
+        g_pinv = np.linalg.pinv(g, rcond=RANK_TOLERANCE)
+        fixed = qd - np.einsum("ndc,nc->nd", g_pinv, np.einsum("ncd,nd->nc", g, qd))
+        fixed[~regular] = qd[~regular]
+        rates = st.angle_rate.copy()  # the other measured rates (wheels) are kept
+        rates[:, self.coordinate_channels] = fixed[:, 3:]
+        st_c = self.state(st.q, fixed[:, :3], st.angles, rates)
+        g, g_dot_qd = self.constraints(st_c)  # type: ignore[misc]
+        viol = np.einsum("ncd,nd->nc", g, qdd) + g_dot_qd
+        qdd_c = qdd - np.einsum("ndc,nc->nd", np.linalg.pinv(g, rcond=RANK_TOLERANCE), viol)
+        qdd_c[~regular] = qdd[~regular]
+        return st_c, qdd_c
+
     def singular_ratio(self, st: State) -> np.ndarray | None:
         """σ_r / σ_1 (N,) of the base block of the constraint rows at ``st``, r the
         :attr:`motion_rank` (:func:`base_singular_ratio`); None without constraints. Below
@@ -340,20 +366,37 @@ class PlatformModel:
                  for g, u in self.groups]
         return _gather(parts, self.layout.n_currents, 1)
 
-    def plans(self, t: np.ndarray, twists: np.ndarray) -> list[tuple[np.ndarray, ...] | None]:
-        """Per group, the planned angles and rates of its position-controlled joints along
-        base-frame twists (R, N, 3) at times t (N,) — (angles (N, R, k), rates (N, R, k)) of
-        the steered wheels' steering (:meth:`predict_angles` of the type) — or None."""
+    @property
+    def planned_columns(self) -> list[str]:
+        """The log columns of the own coordinates that a run's setpoints may plan besides
+        the base twist (a leg's extension, ``leg_u``), in platform order."""
+        return [ch.column(name) for g, u in self.groups for name in u.names
+                for ch in getattr(g.type, "planned_channels", ())]
+
+    @property
+    def planned_angles(self) -> np.ndarray:
+        """The angle channels (L,) of :attr:`planned_columns`."""
+        index = {n: i for i, n in enumerate(self.layout.angle_names)}
+        return np.array([index[c] for c in self.planned_columns], int)
+
+    def plans(self, t: np.ndarray, twists: np.ndarray, planned: np.ndarray | None = None
+              ) -> list[tuple[np.ndarray, ...] | None]:
+        """Per group, what its controllers track along base-frame twists (R, N, 3) at times
+        t (N,) — its type's ``controller_plan``: the steered wheels' planned steering angles
+        and rates (N, R, k); a leg's planned extension, its rates and then its wheel's plan —
+        or None. ``planned`` (R, N, L): the :attr:`planned_columns` (NaN: not planned)."""
         out: list[tuple[np.ndarray, ...] | None] = []
+        start = 0
         for g, u in self.groups:
+            n_planned = len(getattr(g.type, "planned_channels", ())) * u.n_units
+            mine = None if planned is None else planned[..., start:start + n_planned]
+            start += n_planned
             if not hasattr(u, "controller_setpoints"):
                 out.append(None)
-                continue
-            pred = u.predict_angles(t, twists)
-            own = list(getattr(g.type, "coordinates", ()))
-            a = pred.angles.reshape(*pred.angles.shape[:2], u.n_units, -1)[..., own[0]]
-            r = pred.rates.reshape(*pred.rates.shape[:2], u.n_units, -1)[..., own[0]]
-            out.append((np.swapaxes(a, 0, 1), np.swapaxes(r, 0, 1)))
+            elif n_planned:
+                out.append(u.controller_plan(t, twists, mine))
+            else:
+                out.append(u.controller_plan(t, twists))
         return out
 
     def setpoints(self, q: np.ndarray, twist: np.ndarray, twist_rate: np.ndarray,
@@ -371,8 +414,8 @@ class PlatformModel:
         for i, (g, u) in enumerate(self.groups):
             ang = _take(angles, g.angles, 1)
             if hasattr(u, "controller_setpoints"):
-                plan = None if plans is None or plans[i] is None else (
-                    plans[i][0][step], plans[i][1][step])  # type: ignore[index]
+                plan = None if plans is None or plans[i] is None else tuple(
+                    p[step] for p in plans[i])  # type: ignore[union-attr]
                 r, e = u.controller_setpoints(twist, twist_rate, ang, plan)
             else:
                 r, e = u.actuator_rates(q, world, ang), None

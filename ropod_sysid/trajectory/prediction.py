@@ -95,12 +95,14 @@ def steering_points(platform: Platform) -> np.ndarray | None:
 
 def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
                    initial: np.ndarray | None = None, twist_rates: np.ndarray | None = None,
-                   ) -> Prediction:
+                   planned: np.ndarray | None = None) -> Prediction:
     """Every group's angles along base-frame twists (…, N, 3) at times t (N,).
 
     ``model``: a :class:`~ropod_sysid.model.PlatformModel` (or a platform); ``initial`` (…, J)
     initial angles (default: each type's trailing start); with ``twist_rates`` the quasi-steady
-    closed form (:meth:`UnitType.quasi_steady_angles`) instead of integration.
+    closed form (:meth:`UnitType.quasi_steady_angles`) instead of integration. ``planned``
+    (…, N, L): the run's planned own coordinates (:attr:`PlatformModel.planned_columns`, a
+    leg's extension; NaN or None: the type's default), given to the types that plan them.
     """
     from ropod_sysid.model import PlatformModel
 
@@ -120,12 +122,20 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
     wheel_actuators = np.ones(layout.n_currents, bool)
     flags: dict[str, np.ndarray] = {}
     lag = None if twist_rates is None else np.zeros((*lead, n_units))
+    first = 0
     for g, unit in model.groups:
+        n_planned = len(getattr(g.type, "planned_channels", ())) * len(g.units)
+        mine = None if planned is None else np.asarray(planned, float)[..., first:first
+                                                                       + n_planned]
+        first += n_planned
+        if mine is not None and not np.isfinite(mine).all():
+            mine = None
+        extra = {} if not n_planned else {"legs": None if mine is None else mine[..., 0]}
         if twist_rates is not None:
-            p = unit.quasi_steady_angles(t, tw, twist_rates)  # type: ignore[attr-defined]
+            p = unit.quasi_steady_angles(t, tw, twist_rates, **extra)  # type: ignore[attr-defined]
         else:
             start = None if initial is None else np.asarray(initial, float)[..., g.angles]
-            p = unit.predict_angles(t, tw, start)  # type: ignore[attr-defined]
+            p = unit.predict_angles(t, tw, start, **extra)  # type: ignore[attr-defined]
         angles[..., g.angles] = p.angles
         rates[..., g.angles] = p.rates
         act[..., g.currents] = p.actuator
@@ -150,6 +160,12 @@ def _variant_prediction(traj: Trajectory, model: object,
                         ) -> tuple[Trajectory, np.ndarray, Prediction]:
     """The run on the fine grid (the pivot ODE is stiff: :func:`_fine`), the twists (4, N, 3)
     of its four variants there and their predicted angles."""
+    from ropod_sysid.model import PlatformModel
+
     fine = _fine(traj)
-    twists = np.stack([vt.twist() for vt in variants(fine).values()])
-    return fine, twists, predict_angles(fine.t, twists, model)
+    var = variants(fine).values()
+    twists = np.stack([vt.twist() for vt in var])
+    columns = (model if isinstance(model, PlatformModel) else PlatformModel(model)  # type: ignore[arg-type]
+               ).planned_columns
+    planned = np.stack([vt.planned_series(columns) for vt in var]) if columns else None
+    return fine, twists, predict_angles(fine.t, twists, model, planned=planned)

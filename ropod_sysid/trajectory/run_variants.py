@@ -33,7 +33,8 @@ def variant(traj: Trajectory, name: str) -> Trajectory:
     if name == "original":
         return traj
     sx, sy, sw = VARIANT_SIGNS[name]
-    return Trajectory.from_twist(traj.t, sx * traj.vx, sy * traj.vy, sw * traj.omega)
+    return Trajectory.from_twist(traj.t, sx * traj.vx, sy * traj.vy, sw * traj.omega,
+                                 traj.planned)  # a planned leg extends the same way
 
 
 def variants(traj: Trajectory) -> dict[str, Trajectory]:

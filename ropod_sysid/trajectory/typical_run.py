@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.assembly import SINGULAR_MARGIN
 from ropod_sysid.platform import Platform, ropod_platform
 from ropod_sysid.trajectory.blends import _path, _Plan, _sample
@@ -34,7 +35,7 @@ from ropod_sysid.trajectory.limits import (
 )
 from ropod_sysid.trajectory.prediction import predict_angles, steering_points, trailing_points
 from ropod_sysid.trajectory.run_variants import _off_floor, variants
-from ropod_sysid.trajectory.setpoints import Trajectory
+from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
 
 TYPICAL_MAX_DURATION = 3600.0  # typical(): the longest run [s] (an hour of driving)
 SPIN_START_MIN = 30.0  # typical(): runs this long [s] or longer start with a rotation in place
@@ -406,15 +407,18 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         if t[-1] < duration - 1e-9:
             t = np.append(t, duration)
         tw = _sample(segs, t)
-        traj = Trajectory.from_twist(t, tw[:, 0], tw[:, 1], tw[:, 2])
+        traj = with_planned(Trajectory.from_twist(t, tw[:, 0], tw[:, 1], tw[:, 2]), platform,
+                            seed)  # legs: their extensions planned with the base motion
         var = variants(traj)
         if _off_floor(var, floor) is not None:
             shrink *= 0.93
             last_error = "the planned run leaves the floor"
             continue
         if pivots is not None or steering is not None or wheel_rate_max is not None:
+            columns = PlatformModel(platform).planned_columns if platform else []
             pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]),
-                                  platform)
+                                  platform, planned=np.stack([vt.planned_series(columns)
+                                                              for vt in var.values()]))
             peak = pred.turning_peak
             if pivots is not None and (peak > pivot_rate_max * 0.95 or pred.flagged):
                 pivot_margin *= 0.8

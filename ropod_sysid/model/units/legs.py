@@ -56,6 +56,7 @@ One group holds one legged unit (its transform is its own); the legs' mass is on
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -68,12 +69,19 @@ from ropod_sysid.model.units import (
     Channel,
     FrictionVariant,
     check_variant,
+    integrated,
     series,
 )
 
 LEG_CHANNEL = Channel("leg_{u}", "leg", "m", "leg extension lambda (attachment point hip + "
                       "lambda * axis)")
 LEG_KEYS = ("hip", "axis", "range")
+LEG_GAIN = 2.0  # [1/s]: the commanded leg rate corrects the extension's error at this rate
+LEG_RATE_MAX = 0.1  # [m/s]: planned leg rates stay below this
+LEG_START_SPEED = 0.05  # [m/s]: planned legs move only while the base is faster than this
+LEG_SPEED_RATIO = 3.0  # planned leg rates stay below the base's speed at the leg / this
+REST_SPEED = 0.01  # [m/s]: a wheel centre slower than this while the base moves is at rest
+TYPE_A = "wheel at rest (type A)"  # the prediction's flag (002 §III-C)
 AXIS_TOLERANCE = 1e-3  # |axis| may differ from 1 by this much (then it is normalised)
 
 
@@ -228,6 +236,7 @@ class LeggedUnits:
     turning: ClassVar[str | None]
     steering: ClassVar[str | None]
     steering_current: ClassVar[int]
+    planned_channels: ClassVar[tuple[Channel, ...]] = (LEG_CHANNEL,)  # a run plans λ
     leg_parameters: ClassVar[dict[str, tuple[str, str]]] = {
         "m_leg": ("kg", "mass moving with a leg's attachment point"),
         "flv": ("N s/m", "viscous leg friction"),
@@ -424,13 +433,13 @@ class LeggedUnits:
         return m, b
 
     def a_id(self, data: LegData, qdd: np.ndarray) -> np.ndarray:
-        """Columns of A_ID for the wheel type's inertial parameters and m_leg: Tᵀ A_ID,L at
-        q̈_L (L2, L3), and A_Pᵀ (A_P q̈ + Ȧ_P q̇) (L6); (N, 4 + e, p + 1)."""
+        """Columns of A_ID for m_leg and the wheel type's inertial parameters: A_Pᵀ (A_P q̈ +
+        Ȧ_P q̇) (L6), and Tᵀ A_ID,L at q̈_L (L2, L3); (N, 4 + e, 1 + p)."""
         cols = self.wheel.a_id(data.wheel, self.wheel_accelerations(data, qdd))
         wheel = np.einsum("nri,nrp->nip", data.t, cols)
         acc = np.einsum("nri,ni->nr", data.a_p, qdd) + data.a_p_dot_qd
         leg = np.einsum("nri,nr->ni", data.a_p, acc)
-        return np.concatenate([wheel, leg[..., None]], axis=2)
+        return np.concatenate([leg[..., None], wheel], axis=2)
 
     def _leg_coefficients(self, params: Mapping[str, float]) -> tuple[float, float]:
         u = self.spec.name
@@ -488,19 +497,52 @@ class LeggedUnits:
         point at the leg's mean extension; the extension appended."""
         tw, lead = series(twists)
         lam = self._leg_series(t, tw, legs)
-        lam_rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
-        tw_l = tw.copy()
-        d = lam[..., None] * self.axis
-        tw_l[..., :2] += tw[..., 2:3] * _turn(d - self.leg.middle * self.axis)
-        tw_l[..., :2] += lam_rate[..., None] * self.axis
+        tw_l, lam_rate = self._leg_end_twist(t, tw, lam)
         wheel_init = None if initial is None else np.asarray(initial, float)[..., :-1]
         pred = self._wheel_at(self.leg.middle).predict_angles(t, tw_l, wheel_init)
         ang = np.concatenate([pred.angles.reshape(*tw.shape[:2], -1), lam[..., None]], axis=-1)
         rates = np.concatenate([pred.rates.reshape(*tw.shape[:2], -1), lam_rate[..., None]],
                                axis=-1)
+        flags = dict(pred.flags)
+        # 002 §III-C: a wheel at rest while the base moves (type A: its steering undefined)
+        mid = self.leg.point(self.leg.middle)
+        centre = np.hypot(tw_l[..., 0] - tw_l[..., 2] * mid[1],
+                          tw_l[..., 1] + tw_l[..., 2] * mid[0])
+        moving = np.hypot(tw[..., 0], tw[..., 1]) + np.abs(tw[..., 2]) * np.hypot(*mid) > (
+            REST_SPEED)
+        flags[TYPE_A] = (moving & (centre < REST_SPEED))[..., None]
         return AnglePrediction(ang.reshape(*lead, *ang.shape[1:]),
                                rates.reshape(*lead, *rates.shape[1:]),
-                               pred.actuator, pred.turning, pred.flags, pred.lag)
+                               pred.actuator, pred.turning,
+                               {k: v.reshape(*lead, *v.shape[1:]) for k, v in flags.items()},
+                               pred.lag)
+
+    def plan_coordinates(self, t: np.ndarray, twists: np.ndarray, seed: int = 0,
+                         rate_max: float = LEG_RATE_MAX) -> dict[str, np.ndarray]:
+        """A planned extension for an identification run along base-frame twists (N, 3) at
+        times t (N,) [s]: λ = middle + A sin(2π f s + φ), A = 40 % of the range's width, a
+        frequency and phase of its own per unit (so that the legs' masses and frictions
+        separate), on a progress s that advances only while the base moves: ṡ = a minimum-jerk
+        step of (speed − :data:`LEG_START_SPEED`) / (:data:`LEG_SPEED_RATIO` · A 2π f)
+        clipped to [0, 1], the speed that of the attachment point's base motion at its
+        middle (|v| + |ω| |P|). So the leg moves slower than that speed / LEG_SPEED_RATIO, no
+        wheel comes to rest while the base moves (002 §III-C, type A), the legs stand still
+        while the base is slow, and λ stays within its range; the rate is at most
+        ``rate_max`` [m/s]."""
+        t = np.asarray(t, float)
+        tw = np.asarray(twists, float).reshape(t.size, 3)
+        amp = 0.4 * (self.leg.range[1] - self.leg.range[0])
+        rng = np.random.default_rng([zlib.crc32(self.spec.name.encode()), seed])
+        freq = 0.8 * rate_max / (2 * np.pi * amp) * rng.uniform(0.6, 1.0)
+        phase = rng.uniform(0, 2 * np.pi)
+        reach = float(np.hypot(*self.leg.point(self.leg.middle)))
+        speed = np.hypot(tw[:, 0], tw[:, 1]) + np.abs(tw[:, 2]) * reach
+        x = np.clip((speed - LEG_START_SPEED) / (LEG_SPEED_RATIO * amp * 2 * np.pi * freq),
+                    0.0, 1.0)
+        gate = x**3 * (10.0 - 15.0 * x + 6.0 * x * x)  # minimum-jerk: smooth on and off
+        progress = integrated(t, gate[None, :, None], np.zeros((1, 1)))[0, :, 0]
+        lam = self.leg.middle + amp * np.sin(2 * np.pi * freq * progress + phase)
+        return {LEG_CHANNEL.column(self.spec.name): lam}
 
     def _leg_series(self, t: np.ndarray, tw: np.ndarray, legs: np.ndarray | None
                     ) -> np.ndarray:
@@ -509,14 +551,92 @@ class LeggedUnits:
         return np.broadcast_to(np.asarray(legs, float).reshape(-1, tw.shape[1]),
                                tw.shape[:2]).copy()
 
-    def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray, twist_rates: np.ndarray
-                            ) -> AnglePrediction:
-        """The wheel's, with the leg at the middle of its range."""
-        pred = self._wheel_at(self.leg.middle).quasi_steady_angles(t, twists, twist_rates)
-        lam = np.full(pred.angles.shape[:-1] + (1,), self.leg.middle)
-        return AnglePrediction(np.concatenate([pred.angles, lam], axis=-1),
-                               np.concatenate([pred.rates, 0.0 * lam], axis=-1),
-                               pred.actuator, pred.turning, pred.flags, pred.lag)
+    def quasi_steady_angles(self, t: np.ndarray, twists: np.ndarray, twist_rates: np.ndarray,
+                            legs: np.ndarray | None = None) -> AnglePrediction:
+        """The wheel's, for the leg-end frame's twist and its rate with the leg at ``legs``
+        (…, N) (held at the middle of its range when not given)."""
+        tw, lead = series(twists)
+        twd = np.asarray(twist_rates, float).reshape(tw.shape)
+        lam = self._leg_series(t, tw, legs)
+        if legs is None:
+            tw_l, twd_l = tw, twd
+        else:
+            tw_l, _ = self._leg_end_twist(t, tw, lam)
+            twd_l = np.gradient(tw_l, t, axis=1) if tw.shape[1] > 1 else np.zeros_like(tw)
+        pred = self._wheel_at(self.leg.middle).quasi_steady_angles(t, tw_l, twd_l)
+        rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+        ang = np.concatenate([pred.angles.reshape(*tw.shape[:2], -1), lam[..., None]], axis=-1)
+        rates = np.concatenate([pred.rates.reshape(*tw.shape[:2], -1), rate[..., None]],
+                               axis=-1)
+        return AnglePrediction(ang.reshape(*lead, *ang.shape[1:]),
+                               rates.reshape(*lead, *rates.shape[1:]), pred.actuator,
+                               pred.turning, pred.flags, pred.lag)
+
+    def _leg_end_twist(self, t: np.ndarray, tw: np.ndarray, lam: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The base-frame twists (V, N, 3) of the leg-end frame moved to the leg's middle
+        attachment point (what :meth:`_wheel_at` its middle sees) for base twists (V, N, 3)
+        and extensions λ (V, N), and λ̇ (V, N)."""
+        rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+        tw_l = tw.copy()
+        tw_l[..., :2] += tw[..., 2:3] * _turn((lam - self.leg.middle)[..., None] * self.axis)
+        tw_l[..., :2] += rate[..., None] * self.axis
+        return tw_l, rate
+
+    def controller_plan(self, t: np.ndarray, twists: np.ndarray,
+                        planned: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """What the controllers track along base-frame twists (R, N, 3) at times t (N,) with
+        the leg's planned extension ``planned`` (R, N, 1) (NaN or None: not planned, the leg
+        held): λ_d, λ̇_d, λ̈_d (N, R), then the wheel's own plan for the leg-end frame's
+        motion (:meth:`predict_angles`) if its type has one."""
+        tw = np.asarray(twists, float)
+        lam = None if planned is None else np.asarray(planned, float)[..., 0]
+        if lam is not None and not np.isfinite(lam).all():
+            lam = None
+        if lam is None:
+            lam_d = np.full(tw.shape[:2], np.nan)
+            rate = acc = np.zeros(tw.shape[:2])
+        else:
+            lam_d = lam
+            rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+            acc = np.gradient(rate, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+        leg = tuple(np.swapaxes(a, 0, 1) for a in (lam_d, rate, acc))
+        if not hasattr(self.wheel, "controller_plan"):
+            return leg
+        pred = self.predict_angles(t, tw, legs=lam)
+        wheel = AnglePrediction(pred.angles[..., :-1], pred.rates[..., :-1], pred.actuator)
+        return leg + tuple(self.wheel.controller_plan(t, tw, wheel))
+
+    def controller_setpoints(self, twist: np.ndarray, twist_rate: np.ndarray,
+                             angles: np.ndarray, plan: tuple[np.ndarray, ...] | None = None
+                             ) -> tuple[np.ndarray, np.ndarray]:
+        """The wheel's setpoints for the leg-end frame's base-frame twist ν_L = Tᵦ ν + (λ̇ a, 0)
+        (L1) and its rate, the leg commanded at λ̇_d + :data:`LEG_GAIN` (λ_d − λ) (002 drives
+        its legs through the wheels' rates: the legs are passive). ``plan`` (one step of
+        :meth:`controller_plan`): λ_d, λ̇_d, λ̈_d (R,) and the wheel's plan; without a plan
+        the leg is held. A wheel type without position-controlled joints gets its inverse
+        kinematics (speed control: the angle errors NaN)."""
+        wheel_angles, lam = self._split(angles)
+        rate = np.zeros(lam.shape)
+        acc = np.zeros(lam.shape)
+        wheel_plan = None
+        if plan is not None:
+            lam_d, rate_d, acc_d = (np.asarray(p, float).reshape(-1) for p in plan[:3])
+            planned = np.isfinite(lam_d)
+            rate = np.where(planned, rate_d + LEG_GAIN * (np.where(planned, lam_d, 0.0) - lam),
+                            0.0)
+            acc = np.where(planned, acc_d, 0.0)
+            wheel_plan = tuple(plan[3:]) or None
+        d = lam[:, None] * self.axis
+        tw = np.array(twist, float)
+        tw[:, :2] += twist[:, 2:3] * _turn(d) + rate[:, None] * self.axis
+        twd = np.array(twist_rate, float)
+        twd[:, :2] += (twist_rate[:, 2:3] * _turn(d) + twist[:, 2:3] * rate[:, None]
+                       * _turn(self.axis) + acc[:, None] * self.axis)
+        if hasattr(self.wheel, "controller_setpoints"):
+            return self.wheel.controller_setpoints(tw, twd, wheel_angles, wheel_plan)
+        rates = self.wheel.actuator_rates(np.zeros((tw.shape[0], 3)), tw, wheel_angles)
+        return rates, np.full_like(rates, np.nan)
 
     # ------------------------------------------------------------ report / inspect
     def unit_table(self) -> list[dict[str, float | str]]:
@@ -553,7 +673,8 @@ def legged(wheel_type: Any) -> type[LeggedUnits]:
         "currents": wheel_type.currents,
         "coordinates": (*getattr(wheel_type, "coordinates", ()), len(wheel_type.angles)),
         "platform_keys": wheel_type.platform_keys,
-        "inertial_names": (*wheel_type.inertial_names, "m_leg"),
+        # m_leg first: where it lumps with the wheel's spin inertia it stands for the sum
+        "inertial_names": ("m_leg", *wheel_type.inertial_names),
         "parameter_info": {**wheel_type.parameter_info, **LeggedUnits.leg_parameters},
         "friction_signs": {**wheel_type.friction_signs, "flv": -1, "flc": -1},
         "turning": wheel_type.turning,
@@ -563,8 +684,6 @@ def legged(wheel_type: Any) -> type[LeggedUnits]:
     bases: tuple[type, ...] = (LeggedUnits,)
     if hasattr(wheel_type, "constraint_jacobian"):
         bases = (_Constrained, LeggedUnits)
-    if hasattr(wheel_type, "controller_setpoints"):
-        bases = (_Positioned, *bases)
     return type(f"Legged{wheel_type.__name__}", bases, attrs)
 
 
@@ -576,26 +695,3 @@ class _Constrained:
         g_l, g_dot = self.wheel.constraint_jacobian(data.wheel)
         g = np.einsum("ncr,nri->nci", g_l, data.t)
         return g, g_dot + np.einsum("ncr,nr->nc", g_l, data.t_dot_qd)
-
-
-class _Positioned:
-    """A legged wheel whose type has position-controlled joints (the steered wheel's
-    steering): its setpoints for the leg-end frame's twist."""
-
-    def controller_setpoints(self: Any, twist: np.ndarray, twist_rate: np.ndarray,
-                             angles: np.ndarray, plan: tuple[np.ndarray, ...] | None = None,
-                             leg_rate: np.ndarray | None = None,
-                             leg_acc: np.ndarray | None = None
-                             ) -> tuple[np.ndarray, np.ndarray]:
-        """The wheel's setpoints (001 eqs. 24–25) for the leg-end frame's base-frame twist
-        ν_L = Tᵦ ν + (λ̇ a, 0) (L1) and its rate, the legs moving at ``leg_rate`` (N,)."""
-        wheel_angles, lam = self._split(angles)
-        rate = np.zeros(lam.shape) if leg_rate is None else np.asarray(leg_rate, float)
-        acc = np.zeros(lam.shape) if leg_acc is None else np.asarray(leg_acc, float)
-        d = lam[:, None] * self.axis
-        tw = np.array(twist, float)
-        tw[:, :2] += twist[:, 2:3] * _turn(d) + rate[:, None] * self.axis
-        twd = np.array(twist_rate, float)
-        twd[:, :2] += (twist_rate[:, 2:3] * _turn(d) + twist[:, 2:3] * rate[:, None]
-                       * _turn(self.axis) + acc[:, None] * self.axis)
-        return self.wheel.controller_setpoints(tw, twd, wheel_angles, plan)

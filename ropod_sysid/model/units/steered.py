@@ -406,6 +406,17 @@ class SteeredUnits:
         errors = np.stack([np.full_like(beta, np.nan), beta_d - beta], axis=-1)
         return rates, errors.reshape(beta.shape[0], -1)
 
+    def controller_plan(self, t: np.ndarray, twists: np.ndarray,
+                        prediction: AnglePrediction | None = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """The planned steering angles and rates (N, R, k) that :meth:`controller_setpoints`
+        tracks along base-frame twists (R, N, 3) at times t (N,): :meth:`predict_angles`, or
+        the given ``prediction`` of the unit angles (R, N, 2k)."""
+        pred = self.predict_angles(t, twists) if prediction is None else prediction
+        shape = (*pred.angles.shape[:2], self.n_units, 2)
+        return (np.swapaxes(pred.angles.reshape(shape)[..., STEER], 0, 1),
+                np.swapaxes(pred.rates.reshape(shape)[..., STEER], 0, 1))
+
     def actuator_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Drive rates J_i q̇_b (S1) at the current steering angles, steering rates 0 (the
         steering is position-controlled: :meth:`steering_setpoints`); (N, 2k)."""
