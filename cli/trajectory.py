@@ -335,8 +335,10 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
                      wheel_rate_max, steer_rate_max)
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
+    from ropod_sysid.model import PlatformModel
+
     platform = load_platform(platform_path)
-    traj = read_trajectory_csv(traj_path)
+    traj = read_trajectory_csv(traj_path, PlatformModel(platform).planned_columns)
     params = _params(params_path, platform)
     fl = _floor(floor)
     sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=False)

@@ -562,8 +562,10 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
+            enc = platform.layout.encoders
             note = counts_note(log.source, detect_encoder_counts(
-                log.angles, np.asarray(platform.layout.wrapped)), options.encoder_counts)
+                log.angles[:, enc], np.asarray(platform.layout.wrapped)[enc]),
+                options.encoder_counts)
             out.append((log.source, triangles(model, pre, options.friction,
                                               encoder_counts=options.encoder_counts),
                         pre.notes + ([note] if note else []), None))

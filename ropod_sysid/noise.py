@@ -181,7 +181,14 @@ def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np
     step = 2.0 * math.pi / int(noise.encoder_counts)
     counts = np.abs(st.angle_rate) * noise.dt / step  # type: ignore[attr-defined]  # (N, J)
     m = m * np.sqrt(np.minimum(counts, 1.0))[:, None, :]
+    m[:, :, ~_encoders(model, g.shape[2])] = 0.0  # a leg's extension is no rotary encoder
     return m @ np.swapaxes(m, 1, 2) * encoder_variance(int(noise.encoder_counts)) * power
+
+
+def _encoders(model: object, n_angles: int) -> np.ndarray:
+    """(J,) bool: the platform's rotary-encoder channels (:attr:`Layout.encoders`)."""
+    layout = getattr(model, "layout", None)
+    return np.ones(n_angles, bool) if layout is None else np.asarray(layout.encoders, bool)
 
 
 def regressor_error_gram(model: object, st: object, noise: SensorNoise,
@@ -208,7 +215,10 @@ def regressor_error_gram(model: object, st: object, noise: SensorNoise,
         power = float(np.sum(row_kernel(noise.grid, velocity_kernel(noise.k, noise.dt)) ** 2))
         var = encoder_variance(int(noise.encoder_counts)) * power * np.minimum(
             np.abs(rates) * noise.dt / (2.0 * math.pi / int(noise.encoder_counts)), 1.0)
+        encoders = _encoders(model, rates.shape[1])
         for j in measured_rate_channels(model, st, qdd, friction):
+            if not encoders[j]:
+                continue
             moved = rates.copy()
             moved[:, j] += h
             da = (model.a_id_ext(model.state(st.q, st.qd, st.angles, moved), qdd, friction)  # type: ignore[attr-defined]

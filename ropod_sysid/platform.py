@@ -65,6 +65,12 @@ class Layout:
         return len(self.angle_names)
 
     @property
+    def encoders(self) -> np.ndarray:
+        """(J,) bool: the angle channels of rotary encoders [rad], whose counts
+        ``--encoder-counts`` gives (a leg's extension [m] is not one)."""
+        return np.array([c.unit == "rad" for c in self.angle_channels], bool)
+
+    @property
     def n_currents(self) -> int:
         return len(self.current_names)
 

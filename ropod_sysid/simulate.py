@@ -429,7 +429,7 @@ def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,
         angles = _interp_rows(t_log, t, angles)
     if sensors.encoder_counts:  # the angle encoders (a leg's extension is not an angle)
         step = 2 * np.pi / sensors.encoder_counts
-        rad = np.array([c.unit == "rad" for c in platform.layout.angle_channels], bool)
+        rad = platform.layout.encoders
         angles = np.array(angles)
         angles[:, rad] = np.round(angles[:, rad] / step) * step
     current = res.tau / platform.torque_constants()

@@ -376,8 +376,10 @@ class _Run:
             from ropod_sysid.noise import counts_note, detect_encoder_counts
 
             self.t0 = float(log.t[0])
+            enc = log.layout.encoders
             note = counts_note(self.name, detect_encoder_counts(
-                log.angles, np.asarray(log.layout.wrapped)), self.blocks.encoder_counts)
+                log.angles[:, enc], np.asarray(log.layout.wrapped)[enc]),
+                self.blocks.encoder_counts)
             if note is not None:
                 self.notes.append(note)
         self.raw += log.n_samples

@@ -5,14 +5,19 @@ partial velocities, virtual power, energy while the legs slide, and the platform
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Parameters, parameter_names
-from ropod_sysid.platform import platform_from_dict
+from ropod_sysid.platform import load_platform, platform_from_dict
 from ropod_sysid.simulate import derivatives, rk4_step
+from ropod_sysid.trajectory import check, read_trajectory_csv, typical
+from ropod_sysid.trajectory.limits import Limits
 
 R = 0.1
 SETTINGS = {"name": "justin", "wheel_radius": R, "torque_constant": 2.0,
@@ -284,3 +289,35 @@ def test_energy_is_conserved_while_the_legs_slide() -> None:
     assert abs(e1 - e0) < 1e-7 * e0
     assert worst < 1e-7
     assert np.abs(angles[0, LEG_COLS] - lam0).min() > 0.01
+
+
+LEGS_DATA = Path(__file__).resolve().parent.parent / "datasets" / "legs"
+LIMITS = Limits(v_max=0.4, w_max=0.5)
+FLOOR = (-5.0, 5.0, -4.0, 4.0)
+
+
+def test_typical_plans_the_legs_and_check_names_what_they_determine(tmp_path: Path) -> None:
+    """``trajectory typical`` plans every leg's extension within its range (the setpoint CSV's
+    ``leg_u`` columns, read back exactly); ``check`` then finds m_leg only with the wheels' spin inertia (m_leg +
+    Jrot_s/r², as the fit names it) and the legs' friction determined. Without the legs'
+    plan (they hold) m_leg is not determined apart from the base, nor is the leg friction."""
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    traj = typical(duration=20.0, v_max=0.4, w_max=0.5, pivot_rate_max=None, floor=FLOOR,
+                   platform=platform)
+    assert sorted(traj.planned) == ["leg_1", "leg_2", "leg_3", "leg_4"]
+    for lam in traj.planned.values():
+        assert 0.37 <= lam.min() and lam.max() <= 0.56
+        assert np.ptp(lam) > 0.05  # the legs do move
+    path = tmp_path / "run.csv"
+    traj.write_csv(path)
+    back = read_trajectory_csv(path, PlatformModel(platform).planned_columns)
+    for c, v in traj.planned.items():
+        assert np.array_equal(back.planned[c], v)
+    params = {"m_b": 126.0, "Jzz_b": 8.0}
+    moving = check(traj, platform, LIMITS, FLOOR, params=params)
+    assert moving.combinations["m_leg"] == "m_leg +100·Jrot_s"
+    assert not any(n.startswith("fl") for n in moving.combinations)
+    held = check(dataclasses.replace(traj, planned={}), platform, LIMITS, FLOOR, params=params)
+    assert "m_leg" in held.combinations and held.combinations["m_leg"] != "m_leg +100·Jrot_s"
+    assert all(f"flv_{u}" in held.combinations or not np.isfinite(
+        held.std[held.names.index(f"flv_{u}")]) for u in "1234")

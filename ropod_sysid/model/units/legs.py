@@ -405,20 +405,26 @@ class LeggedUnits:
         rates = self.wheel.angle_rates(q_l, qd_l, wheel_angles)
         return np.concatenate([rates, np.zeros((rates.shape[0], 1))], axis=1)
 
-    def normal_equations(self, angles: np.ndarray, increments: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray]:
-        """AᵀA (N, 3, 3), Aᵀb (N, 3) of the wheel's rows moved to the base twist: ν_L =
-        Tᵦ ν + (Δλ a, 0) (module docstring, "Odometry")."""
+    def constraint_rows(self, angles: np.ndarray, rates: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """The wheel's odometry rows A ν_L = b moved to the base twist: ν_L = Tᵦ ν + (λ̇ a, 0)
+        (module docstring, "Odometry"): A Tᵦ (N, r, 3) and b − A (λ̇ a, 0) (N, r); ``rates``
+        may be increments."""
         wheel_angles, lam = self._split(angles)
-        wheel_inc, lam_inc = self._split(increments)
-        ata, atb = self.wheel.normal_equations(wheel_angles, wheel_inc)
+        wheel_rates, lam_rate = self._split(rates)
+        a, b = self.wheel.constraint_rows(wheel_angles, wheel_rates)
         n = lam.shape[0]
         tb = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
         tb[:, :2, 2] = _turn(lam[:, None] * self.axis)
         shift = np.zeros((n, 3))
-        shift[:, :2] = lam_inc[:, None] * self.axis
-        atb = atb - np.einsum("nij,nj->ni", ata, shift)
-        return (np.einsum("nji,njk,nkl->nil", tb, ata, tb), np.einsum("nji,nj->ni", tb, atb))
+        shift[:, :2] = lam_rate[:, None] * self.axis
+        return np.einsum("nrj,nji->nri", a, tb), b - np.einsum("nrj,nj->nr", a, shift)
+
+    def normal_equations(self, angles: np.ndarray, increments: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """AᵀA (N, 3, 3) and Aᵀb (N, 3) of :meth:`constraint_rows`."""
+        a, b = self.constraint_rows(angles, increments)
+        return np.einsum("nrc,nrd->ncd", a, a), np.einsum("nrc,nr->nc", a, b)
 
     # ------------------------------------------------------------ dynamics
     def mass_terms(self, data: LegData, params: Mapping[str, float]
