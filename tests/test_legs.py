@@ -298,15 +298,16 @@ FLOOR = (-5.0, 5.0, -4.0, 4.0)
 
 def test_typical_plans_the_legs_and_check_names_what_they_determine(tmp_path: Path) -> None:
     """``trajectory typical`` plans every leg's extension within its range (the setpoint CSV's
-    ``leg_u`` columns, read back exactly); ``check`` then finds m_leg only with the wheels' spin inertia (m_leg +
-    Jrot_s/r², as the fit names it) and the legs' friction determined. Without the legs'
-    plan (they hold) m_leg is not determined apart from the base, nor is the leg friction."""
+    ``leg_u`` columns, read back exactly); ``check`` then finds m_leg only with the wheels'
+    spin inertia (m_leg + Jrot_s/r², as the fit names it) and the legs' friction determined.
+    Without the legs' plan (they hold) m_leg is not determined apart from the base, nor is the
+    leg friction."""
     platform = load_platform(LEGS_DATA / "platform.yaml")
     traj = typical(duration=20.0, v_max=0.4, w_max=0.5, pivot_rate_max=None, floor=FLOOR,
                    platform=platform)
     assert sorted(traj.planned) == ["leg_1", "leg_2", "leg_3", "leg_4"]
     for lam in traj.planned.values():
-        assert 0.37 <= lam.min() and lam.max() <= 0.56
+        assert lam.min() >= 0.37 and lam.max() <= 0.56
         assert np.ptp(lam) > 0.05  # the legs do move
     path = tmp_path / "run.csv"
     traj.write_csv(path)
