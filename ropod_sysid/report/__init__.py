@@ -55,6 +55,7 @@ from ropod_sysid.params import (
     parameter_names,
 )
 from ropod_sysid.platform import Platform
+from ropod_sysid.plotdata import LogPlot
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
 from ropod_sysid.report.painter import Drawn, Painter
@@ -236,20 +237,19 @@ def _verdict_class(text: str) -> str:
 
 
 def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
-               painter: Painter) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
-                          list[tuple[np.ndarray, np.ndarray]]]:
-    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
-    per log its kept rows' times and errors.
+               painter: Painter) -> tuple[list[dict[str, Any]], list[LogPlot], np.ndarray,
+                                          np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """Per log: the figures and numbers, and its plot data; the kept rows' errors and
+    velocities of all logs; per log its kept rows' times and errors.
 
     The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
     the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
-    fit's pass or, when the result has none, by one streamed pass over ``logs``.
+    fit's pass or, when the result has none, by one streamed pass over ``logs``. The free run
+    is left to :func:`_free_runs`, so that the figures are drawn meanwhile.
     """
     platform = result.platform
     opts = result.options
-    model = PlatformModel(platform)
-    params = result.fitted_parameters()
-    views, errs, vels = [], [], []
+    views, plots, errs, vels = [], [], [], []
     series: list[tuple[np.ndarray, np.ndarray]] = []
     for k, lf in enumerate(result.logs):
         plot = lf.plot
@@ -260,23 +260,13 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
                              row_step=opts.row_step, plot=True)
             plot = res.plot
             assert plot is not None
+        plots.append(plot)
         fit = plot.a_rows @ shown
         err = plot.b_rows - fit
         errs.append(err)
         series.append((plot.t_rows, err))
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
-        predicted = None
-        compiled = runs_compiled(model, params, plot.t_rows)
-        if plot.state_rows is not None and len(plot.t_rows) > 2 and (compiled or k == 0):
-            predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows,
-                                           plot.state_rows,
-                                           None if compiled else FREE_RUN_NUMPY_S)
-        measured = (base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
-                    if predicted is not None and plot.state_rows is not None else None)
-        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured,
-                                                                          predicted)),
-                            strict=True)) if predicted is not None else None)
         views.append({
             "index": k,
             "id": f"log-{k + 1}",
@@ -296,17 +286,37 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "inputs": painter.draw("inputs", plot, platform.layout),
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
-            "fit_pct": fit_pct,
-            "prediction": (painter.draw("predicted_velocity", plot.t_rows, measured,
-                                        predicted, fit_pct)
-                           if predicted is not None and k == 0 else None),
-            "prediction_span": (None if predicted is None else
-                                float(plot.t_rows[np.isfinite(predicted[:, 0])][-1]
-                                      - plot.t_rows[0])),
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
-    return views, all_err, all_vel, series
+    return views, plots, all_err, all_vel, series
+
+
+def _free_runs(result: FitResult, views: list[dict[str, Any]], plots: Sequence[LogPlot],
+               painter: Painter) -> None:
+    """Each log's free run (every log where it is compiled, else the first log's first
+    :data:`FREE_RUN_NUMPY_S`): its fit % and, for the first log, the figure, into ``views``."""
+    model = PlatformModel(result.platform)
+    params = result.fitted_parameters()
+    for k, (view, plot) in enumerate(zip(views, plots, strict=True)):
+        predicted = None
+        compiled = runs_compiled(model, params, plot.t_rows)
+        if plot.state_rows is not None and len(plot.t_rows) > 2 and (compiled or k == 0):
+            predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows,
+                                           plot.state_rows,
+                                           None if compiled else FREE_RUN_NUMPY_S)
+        measured = (base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
+                    if predicted is not None and plot.state_rows is not None else None)
+        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured,
+                                                                          predicted)),
+                            strict=True)) if predicted is not None else None)
+        view["fit_pct"] = fit_pct
+        view["prediction"] = (painter.draw("predicted_velocity", plot.t_rows, measured,
+                                           predicted, fit_pct)
+                              if predicted is not None and k == 0 else None)
+        view["prediction_span"] = (None if predicted is None else
+                                   float(plot.t_rows[np.isfinite(predicted[:, 0])][-1]
+                                         - plot.t_rows[0]))
 
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
@@ -397,9 +407,18 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
     rms = result.physical_rms if result.physical_rms is not None else result.rms
     verdict = identifiability_verdict(result)
 
-    log_views, all_err, all_vel, series = _log_views(result, logs, shown, painter)
+    log_views, plots, all_err, all_vel, series = _log_views(result, logs, shown, painter)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
+    # every figure that needs no free run is being drawn while the free runs integrate
+    figures = {
+        "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
+                                  result.options.rcond),
+        "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
+        "hist_figure": painter.draw("residual_histograms", all_err),
+        "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),
+        "acf_figure": painter.draw("residual_autocorrelation", series, STRETCH_S),
+    }
 
     validation = []
     if validation_logs:
@@ -415,6 +434,8 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
                 "figure": painter.draw("observer", v.t, v.f_hat, FORCE_THRESHOLD,
                                        TORQUE_THRESHOLD),
             })
+
+    _free_runs(result, log_views, plots, painter)
 
     warnings = []
     n_implausible = sum(1 for r in rows if any(f[0] == "implausible" for f in r["flags"]))
@@ -460,14 +481,9 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
         "only_other": only_other,
         "n_implausible": n_implausible,
         "n_combination": int(np.sum(sol.combination)),
-        "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
-                                  result.options.rcond),
         "null_space": sol.null_space_text(),
-        "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
         "combinations": [(k, v) for k, v in sol.combinations.items()],
-        "hist_figure": painter.draw("residual_histograms", all_err),
-        "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),
-        "acf_figure": painter.draw("residual_autocorrelation", series, STRETCH_S),
+        **figures,
         "validation": validation,
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
     }
