@@ -51,6 +51,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
     UNITS_OF,
+    DynamicParameters,
     kind_of,
     parameter_names,
 )
@@ -58,7 +59,7 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
-from ropod_sysid.report.painter import Drawn, Painter
+from ropod_sysid.report.painter import Drawn, Painter, Pending, png_uri
 from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
@@ -236,31 +237,37 @@ def _verdict_class(text: str) -> str:
     return "warn"
 
 
-def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
-               painter: Painter) -> tuple[list[dict[str, Any]], list[LogPlot], np.ndarray,
-                                          np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
-    """Per log: the figures and numbers, and its plot data; the kept rows' errors and
-    velocities of all logs; per log its kept rows' times and errors.
-
-    The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
-    the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
-    fit's pass or, when the result has none, by one streamed pass over ``logs``. The free run
-    is left to :func:`_free_runs`, so that the figures are drawn meanwhile.
-    """
-    platform = result.platform
+def _plots(result: FitResult, logs: Sequence[Source] | None) -> list[LogPlot]:
+    """Per log its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the fit's
+    pass or, when the result has none, by one streamed pass over ``logs``."""
     opts = result.options
-    views, plots, errs, vels = [], [], [], []
-    series: list[tuple[np.ndarray, np.ndarray]] = []
+    plots = []
     for k, lf in enumerate(result.logs):
         plot = lf.plot
         if plot is None:
             if logs is None:
                 raise InputError(f"{lf.source}: the fit kept no plot data; give the fit's logs")
-            res = stream_log(logs[k], platform, opts.span, result.input_delay, opts.friction,
-                             row_step=opts.row_step, plot=True)
+            res = stream_log(logs[k], result.platform, opts.span, result.input_delay,
+                             opts.friction, row_step=opts.row_step, plot=True)
             plot = res.plot
             assert plot is not None
         plots.append(plot)
+    return plots
+
+
+def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
+               painter: Painter) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
+                                          list[tuple[np.ndarray, np.ndarray]]]:
+    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
+    per log its kept rows' times and errors.
+
+    The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
+    the figures from its plot data. The free run is :func:`_free_runs`'.
+    """
+    platform = result.platform
+    views, errs, vels = [], [], []
+    series: list[tuple[np.ndarray, np.ndarray]] = []
+    for k, (lf, plot) in enumerate(zip(result.logs, plots, strict=True)):
         fit = plot.a_rows @ shown
         err = plot.b_rows - fit
         errs.append(err)
@@ -289,34 +296,47 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
-    return views, plots, all_err, all_vel, series
+    return views, all_err, all_vel, series
 
 
-def _free_runs(result: FitResult, views: list[dict[str, Any]], plots: Sequence[LogPlot],
-               painter: Painter) -> None:
-    """Each log's free run (every log where it is compiled, else the first log's first
-    :data:`FREE_RUN_NUMPY_S`): its fit % and, for the first log, the figure, into ``views``."""
-    model = PlatformModel(result.platform)
+def free_run_view(platform: Platform, params: DynamicParameters, plot: LogPlot, first: bool
+                  ) -> tuple[dict[str, float] | None, float | None, bytes | None]:
+    """A log's free run (every log where it is compiled, else the first log's first
+    :data:`FREE_RUN_NUMPY_S`): its fit % per DOF, the time it covers [s] and, on the first
+    log, its figure (PNG); all None where there is none. Done by a painter's worker."""
+    model = PlatformModel(platform)
+    compiled = runs_compiled(model, params, plot.t_rows)
+    if plot.state_rows is None or len(plot.t_rows) <= 2 or not (compiled or first):
+        return None, None, None
+    predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows, plot.state_rows,
+                                   None if compiled else FREE_RUN_NUMPY_S)
+    measured = base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
+    fit_pct = dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured, predicted)),
+                       strict=True))
+    span = float(plot.t_rows[np.isfinite(predicted[:, 0])][-1] - plot.t_rows[0])
+    png = None
+    if first:
+        from ropod_sysid.report import figures
+
+        png = figures.predicted_velocity(plot.t_rows, measured, predicted, fit_pct)
+    return fit_pct, span, png
+
+
+def _free_runs(result: FitResult, plots: Sequence[LogPlot], painter: Painter) -> list[Pending]:
+    """Each log's :func:`free_run_view`, the first log's first (its figure comes after it):
+    integrated by the painter's workers while they draw the other figures."""
     params = result.fitted_parameters()
-    for k, (view, plot) in enumerate(zip(views, plots, strict=True)):
-        predicted = None
-        compiled = runs_compiled(model, params, plot.t_rows)
-        if plot.state_rows is not None and len(plot.t_rows) > 2 and (compiled or k == 0):
-            predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows,
-                                           plot.state_rows,
-                                           None if compiled else FREE_RUN_NUMPY_S)
-        measured = (base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
-                    if predicted is not None and plot.state_rows is not None else None)
-        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured,
-                                                                          predicted)),
-                            strict=True)) if predicted is not None else None)
+    return [painter.submit(free_run_view, result.platform, params, plot, k == 0)
+            for k, plot in enumerate(plots)]
+
+
+def _free_run_views(views: list[dict[str, Any]], runs: Sequence[Pending]) -> None:
+    """The free runs' fit %, time and figure into the logs' ``views``."""
+    for view, run in zip(views, runs, strict=True):
+        fit_pct, span, png = run.get()
         view["fit_pct"] = fit_pct
-        view["prediction"] = (painter.draw("predicted_velocity", plot.t_rows, measured,
-                                           predicted, fit_pct)
-                              if predicted is not None and k == 0 else None)
-        view["prediction_span"] = (None if predicted is None else
-                                   float(plot.t_rows[np.isfinite(predicted[:, 0])][-1]
-                                         - plot.t_rows[0]))
+        view["prediction"] = None if png is None else png_uri(png)
+        view["prediction_span"] = span
 
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
@@ -387,7 +407,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     if painter is not None:
         return _render(result, logs, painter, compare, compare_label, validation_logs,
                        params_source, notes, title)
-    with Painter(workers, result.platform.layout) as own:
+    with Painter(workers, result.platform.layout, result.platform) as own:
         return _render(result, logs, own, compare, compare_label, validation_logs,
                        params_source, notes, title)
 
@@ -407,7 +427,9 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
     rms = result.physical_rms if result.physical_rms is not None else result.rms
     verdict = identifiability_verdict(result)
 
-    log_views, plots, all_err, all_vel, series = _log_views(result, logs, shown, painter)
+    plots = _plots(result, logs)
+    runs = _free_runs(result, plots, painter)  # the longest work first
+    log_views, all_err, all_vel, series = _log_views(result, plots, shown, painter)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
     # every figure that needs no free run is being drawn while the free runs integrate
@@ -435,8 +457,7 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
                                        TORQUE_THRESHOLD),
             })
 
-    _free_runs(result, log_views, plots, painter)
-
+    _free_run_views(log_views, runs)
     warnings = []
     n_implausible = sum(1 for r in rows if any(f[0] == "implausible" for f in r["flags"]))
     if n_implausible:

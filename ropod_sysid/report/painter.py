@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from multiprocessing.process import BaseProcess
 
-    from ropod_sysid.platform import Layout
+    from ropod_sysid.platform import Layout, Platform
 
-__all__ = ["Drawn", "Painter", "default_workers", "png_uri"]
+__all__ = ["Drawn", "Painter", "Pending", "default_workers", "png_uri"]
 
 
 def png_uri(data: bytes) -> str:
@@ -50,17 +50,21 @@ def _figure(name: str, args: tuple[Any, ...]) -> bytes:
     return getattr(figures, name)(*args)
 
 
-def _warm(layout: Layout | None) -> None:
+def _warm(layout: Layout | None, platform: Platform | None = None) -> None:
     from ropod_sysid.report import figures
 
     figures.warm(layout)
+    if platform is not None:
+        from ropod_sysid.validate import load_free_run
+
+        load_free_run(platform)
 
 
 PARENT_CHECK_S = 1.0  # how often an idle drawing process checks that its parent lives [s]
 
 
 def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
-    """Draw the figures of ``tasks`` ((id, name, args); None ends) into the connection
+    """Do the work of ``tasks`` ((id, function, args); None ends) into the connection
     ``results`` (shared: sent under ``lock``); after ``stop`` is set, or when this process's
     parent has ended, draw nothing more."""
     parent = os.getppid()
@@ -80,9 +84,9 @@ def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
             return
         if stop.is_set():
             continue
-        key, name, args = task
+        key, func, args = task
         try:
-            drawn = _figure(name, args)
+            drawn = func(*args)
         except Exception as exc:  # raised in the parent where the figure is used
             try:
                 send((key, False, exc))
@@ -93,16 +97,17 @@ def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
 
 
 def _painter(tasks: Any, results: Any, lock: Any, stop: Any, workers: int, warm: bool,
-             layout: Layout | None, reader: Any) -> None:
-    """The first drawing process: loads matplotlib and builds the per-log figures once
-    (:func:`_warm`), then forks the other ``workers`` − 1, which so start warm; all draw.
+             layout: Layout | None, platform: Platform | None, reader: Any) -> None:
+    """The first drawing process: loads matplotlib and builds the per-log figures once, and
+    with ``platform`` the compiled free run (:func:`_warm`), then forks the other
+    ``workers`` − 1, which so start warm; all draw.
     Ctrl-C is the parent's to handle (it stops the drawing). ``reader``: the parent's end of
     ``results``, closed here (so that a drawer whose parent has gone gets an error sending,
     and the parent's end sees the last drawer leave)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     reader.close()
     if warm:
-        _warm(layout)
+        _warm(layout, platform)
     children = []
     for _ in range(workers - 1):
         pid = os.fork()
@@ -119,22 +124,33 @@ def _painter(tasks: Any, results: Any, lock: Any, stop: Any, workers: int, warm:
         os.waitpid(pid, 0)
 
 
-class Drawn:
+class Pending:
+    """Work being done by a painter; :meth:`get` waits for its result."""
+
+    def __init__(self, result: Any = None, wait: Callable[[], Any] | None = None) -> None:
+        self._result = result
+        self._wait = wait
+
+    def get(self) -> Any:
+        if self._wait is not None:
+            self._result, self._wait = self._wait(), None
+        return self._result
+
+
+class Drawn(Pending):
     """A figure being drawn; :meth:`uri` waits for it."""
 
-    def __init__(self, result: bytes | Callable[[], bytes]) -> None:
-        self._result = result
-
     def uri(self) -> str:
-        data = self._result if isinstance(self._result, bytes) else self._result()
-        return png_uri(data)
+        return png_uri(self.get())
 
 
 class Painter:
     """Draws figures of :mod:`ropod_sysid.report.figures` in ``workers`` forked processes
     (default :func:`default_workers`) or, with 1, in this process. ``layout``: the platform's
     log layout, for the workers to build the per-log figures in advance. Use it as a context
-    manager, so that the workers end (at once on an error).
+    manager, so that the workers end (at once on an error). ``platform``: the platform whose
+    free runs the workers will integrate (:meth:`submit`; numba and the compiled loop are
+    loaded in advance too, about 0.5 s).
 
     One process is forked from this one; it loads matplotlib and builds the per-log figures
     while this process reads the logs, then forks the other workers, which so start warm
@@ -142,7 +158,8 @@ class Painter:
     the shipped sample). The workers take the figures from one queue in the order they are
     asked for; a thread here collects the PNGs as they come."""
 
-    def __init__(self, workers: int | None = None, layout: Layout | None = None) -> None:
+    def __init__(self, workers: int | None = None, layout: Layout | None = None,
+                 platform: Platform | None = None) -> None:
         n = default_workers() if workers is None else workers
         if n < 1:
             raise ValueError(f"workers {n}: at least 1")
@@ -163,7 +180,7 @@ class Painter:
         self._ended = False
         self.pool = ctx.Process(target=_painter, name="ropod-sysid-painter", daemon=True,
                                 args=(self._tasks, results, ctx.Lock(), self._stop, n, warm,
-                                      layout, self._results))
+                                      layout, platform, self._results))
         self.pool.start()
         results.close()  # the drawers hold the sending ends: the last to end ends the results
         self._collector = threading.Thread(target=self._collect, daemon=True,
@@ -197,14 +214,20 @@ class Painter:
             raise value
         return value
 
-    def draw(self, name: str, *args: Any) -> Drawn:
-        """The figure ``figures.<name>(*args)`` (PNG bytes), drawn now or by a worker."""
+    def submit(self, func: Callable[..., Any], *args: Any) -> Pending:
+        """``func(*args)`` (a module's function; arguments and result picklable), done now or
+        by a worker."""
         if self.pool is None:
-            return Drawn(_figure(name, args))
+            return Pending(func(*args))
         key = self._next
         self._next += 1
-        self._tasks.put((key, name, args))
-        return Drawn(lambda: self._result(key))
+        self._tasks.put((key, func, args))
+        return Pending(wait=lambda: self._result(key))
+
+    def draw(self, name: str, *args: Any) -> Drawn:
+        """The figure ``figures.<name>(*args)`` (PNG bytes), drawn now or by a worker."""
+        pending = self.submit(_figure, name, args)
+        return Drawn(pending._result, pending._wait)
 
     def __enter__(self) -> Painter:
         return self
