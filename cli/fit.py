@@ -238,7 +238,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         if report_path is not None:  # its workers load matplotlib while the fit reads the logs
             from ropod_sysid.report.painter import Painter
 
-            painter = stack.enter_context(Painter(layout=platform.layout))
+            painter = stack.enter_context(Painter(layout=platform.layout, platform=platform))
         # with --report, the fit's pass also gathers what the report draws: no second reading
         result = fit_files(list(logs), platform, options, workers=workers,
                            dask_address=dask_address, quiet=quiet, plots=painter is not None)

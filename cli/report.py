@@ -58,7 +58,8 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     from ropod_sysid.report.painter import Painter
 
     platform = load_platform(platform_path)
-    with Painter(layout=platform.layout) as painter:  # drawing starts while the logs are read
+    # drawing, and loading the compiled free run, start while the logs are read
+    with Painter(layout=platform.layout, platform=platform) as painter:
         _report(platform, logs, params_path, out_path, compare_path, validate_paths, span,
                 split_gaps, quiet, painter)
     if not quiet:

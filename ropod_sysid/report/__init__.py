@@ -51,13 +51,15 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import (
     DESCRIPTION,
     UNITS_OF,
+    DynamicParameters,
     kind_of,
     parameter_names,
 )
 from ropod_sysid.platform import Platform
+from ropod_sysid.plotdata import LogPlot
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
-from ropod_sysid.report.painter import Drawn, Painter
+from ropod_sysid.report.painter import Drawn, Painter, Pending, png_uri
 from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
@@ -235,48 +237,43 @@ def _verdict_class(text: str) -> str:
     return "warn"
 
 
-def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarray,
-               painter: Painter) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
-                          list[tuple[np.ndarray, np.ndarray]]]:
-    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
-    per log its kept rows' times and errors.
-
-    The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
-    the figures from its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the
-    fit's pass or, when the result has none, by one streamed pass over ``logs``.
-    """
-    platform = result.platform
+def _plots(result: FitResult, logs: Sequence[Source] | None) -> list[LogPlot]:
+    """Per log its plot data (:class:`ropod_sysid.plotdata.LogPlot`), gathered by the fit's
+    pass or, when the result has none, by one streamed pass over ``logs``."""
     opts = result.options
-    model = PlatformModel(platform)
-    params = result.fitted_parameters()
-    views, errs, vels = [], [], []
-    series: list[tuple[np.ndarray, np.ndarray]] = []
+    plots = []
     for k, lf in enumerate(result.logs):
         plot = lf.plot
         if plot is None:
             if logs is None:
                 raise InputError(f"{lf.source}: the fit kept no plot data; give the fit's logs")
-            res = stream_log(logs[k], platform, opts.span, result.input_delay, opts.friction,
-                             row_step=opts.row_step, plot=True)
+            res = stream_log(logs[k], result.platform, opts.span, result.input_delay,
+                             opts.friction, row_step=opts.row_step, plot=True)
             plot = res.plot
             assert plot is not None
+        plots.append(plot)
+    return plots
+
+
+def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
+               painter: Painter) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarray,
+                                          list[tuple[np.ndarray, np.ndarray]]]:
+    """Per log: the figures and numbers; the kept rows' errors and velocities of all logs;
+    per log its kept rows' times and errors.
+
+    The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
+    the figures from its plot data. The free run is :func:`_free_runs`'.
+    """
+    platform = result.platform
+    views, errs, vels = [], [], []
+    series: list[tuple[np.ndarray, np.ndarray]] = []
+    for k, (lf, plot) in enumerate(zip(result.logs, plots, strict=True)):
         fit = plot.a_rows @ shown
         err = plot.b_rows - fit
         errs.append(err)
         series.append((plot.t_rows, err))
         vels.append(plot.qd_rows)
         rms = lf.triangles.rms(shown)
-        predicted = None
-        compiled = runs_compiled(model, params, plot.t_rows)
-        if plot.state_rows is not None and len(plot.t_rows) > 2 and (compiled or k == 0):
-            predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows,
-                                           plot.state_rows,
-                                           None if compiled else FREE_RUN_NUMPY_S)
-        measured = (base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
-                    if predicted is not None and plot.state_rows is not None else None)
-        fit_pct = (dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured,
-                                                                          predicted)),
-                            strict=True)) if predicted is not None else None)
         views.append({
             "index": k,
             "id": f"log-{k + 1}",
@@ -296,17 +293,50 @@ def _log_views(result: FitResult, logs: Sequence[Source] | None, shown: np.ndarr
             "inputs": painter.draw("inputs", plot, platform.layout),
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
-            "fit_pct": fit_pct,
-            "prediction": (painter.draw("predicted_velocity", plot.t_rows, measured,
-                                        predicted, fit_pct)
-                           if predicted is not None and k == 0 else None),
-            "prediction_span": (None if predicted is None else
-                                float(plot.t_rows[np.isfinite(predicted[:, 0])][-1]
-                                      - plot.t_rows[0])),
         })
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
     return views, all_err, all_vel, series
+
+
+def free_run_view(platform: Platform, params: DynamicParameters, plot: LogPlot, first: bool
+                  ) -> tuple[dict[str, float] | None, float | None, bytes | None]:
+    """A log's free run (every log where it is compiled, else the first log's first
+    :data:`FREE_RUN_NUMPY_S`): its fit % per DOF, the time it covers [s] and, on the first
+    log, its figure (PNG); all None where there is none. Done by a painter's worker."""
+    model = PlatformModel(platform)
+    compiled = runs_compiled(model, params, plot.t_rows)
+    if plot.state_rows is None or len(plot.t_rows) <= 2 or not (compiled or first):
+        return None, None, None
+    predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows, plot.state_rows,
+                                   None if compiled else FREE_RUN_NUMPY_S)
+    measured = base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
+    fit_pct = dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured, predicted)),
+                       strict=True))
+    span = float(plot.t_rows[np.isfinite(predicted[:, 0])][-1] - plot.t_rows[0])
+    png = None
+    if first:
+        from ropod_sysid.report import figures
+
+        png = figures.predicted_velocity(plot.t_rows, measured, predicted, fit_pct)
+    return fit_pct, span, png
+
+
+def _free_runs(result: FitResult, plots: Sequence[LogPlot], painter: Painter) -> list[Pending]:
+    """Each log's :func:`free_run_view`, the first log's first (its figure comes after it):
+    integrated by the painter's workers while they draw the other figures."""
+    params = result.fitted_parameters()
+    return [painter.submit(free_run_view, result.platform, params, plot, k == 0)
+            for k, plot in enumerate(plots)]
+
+
+def _free_run_views(views: list[dict[str, Any]], runs: Sequence[Pending]) -> None:
+    """The free runs' fit %, time and figure into the logs' ``views``."""
+    for view, run in zip(views, runs, strict=True):
+        fit_pct, span, png = run.get()
+        view["fit_pct"] = fit_pct
+        view["prediction"] = None if png is None else png_uri(png)
+        view["prediction_span"] = span
 
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
@@ -377,7 +407,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     if painter is not None:
         return _render(result, logs, painter, compare, compare_label, validation_logs,
                        params_source, notes, title)
-    with Painter(workers, result.platform.layout) as own:
+    with Painter(workers, result.platform.layout, result.platform) as own:
         return _render(result, logs, own, compare, compare_label, validation_logs,
                        params_source, notes, title)
 
@@ -397,9 +427,20 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
     rms = result.physical_rms if result.physical_rms is not None else result.rms
     verdict = identifiability_verdict(result)
 
-    log_views, all_err, all_vel, series = _log_views(result, logs, shown, painter)
+    plots = _plots(result, logs)
+    runs = _free_runs(result, plots, painter)  # the longest work first
+    log_views, all_err, all_vel, series = _log_views(result, plots, shown, painter)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
+    # every figure that needs no free run is being drawn while the free runs integrate
+    figures = {
+        "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
+                                  result.options.rcond),
+        "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
+        "hist_figure": painter.draw("residual_histograms", all_err),
+        "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),
+        "acf_figure": painter.draw("residual_autocorrelation", series, STRETCH_S),
+    }
 
     validation = []
     if validation_logs:
@@ -416,6 +457,7 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
                                        TORQUE_THRESHOLD),
             })
 
+    _free_run_views(log_views, runs)
     warnings = []
     n_implausible = sum(1 for r in rows if any(f[0] == "implausible" for f in r["flags"]))
     if n_implausible:
@@ -460,14 +502,9 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
         "only_other": only_other,
         "n_implausible": n_implausible,
         "n_combination": int(np.sum(sol.combination)),
-        "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
-                                  result.options.rcond),
         "null_space": sol.null_space_text(),
-        "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
         "combinations": [(k, v) for k, v in sol.combinations.items()],
-        "hist_figure": painter.draw("residual_histograms", all_err),
-        "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),
-        "acf_figure": painter.draw("residual_autocorrelation", series, STRETCH_S),
+        **figures,
         "validation": validation,
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},
     }
