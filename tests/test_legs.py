@@ -6,12 +6,15 @@ partial velocities, virtual power, energy while the legs slide, and the platform
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.fit import FitOptions, fit_logs
+from ropod_sysid.io import read_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Parameters, parameter_names
 from ropod_sysid.platform import load_platform, platform_from_dict
@@ -322,3 +325,28 @@ def test_typical_plans_the_legs_and_check_names_what_they_determine(tmp_path: Pa
     assert "m_leg" in held.combinations and held.combinations["m_leg"] != "m_leg +100·Jrot_s"
     assert all(f"flv_{u}" in held.combinations or not np.isfinite(
         held.std[held.names.index(f"flv_{u}")]) for u in "1234")
+
+
+def test_the_shipped_leg_sample_is_fitted_within_its_sigma() -> None:
+    """The shipped Justin-like sample (legs moving, 250 Hz, 2¹⁴ counts, 30 mA): the rank
+    analysis names m_leg + 100·J_rot,s (the wheels' spin inertia moves with the legs) and
+    nothing else; with ``--encoder-counts`` every value it determines lies within 3σ of the
+    truth's, but for J_st: its rows see the steering loops' fast torques, point-sampled, and
+    it comes out 2.3 % high (5.9σ, a discretisation bias the σ does not include; as on the
+    steered sample), asserted within 3 %."""
+    logs = [read_log(p, load_platform(LEGS_DATA / "platform.yaml"))
+            for p in sorted(LEGS_DATA.glob("*.csv.gz"))]
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    truth = json.loads((LEGS_DATA / "truth.json").read_text())
+    sol = fit_logs(logs, platform, FitOptions(encoder_counts=2**14)).solution
+    assert sol.combinations["m_leg"] == "m_leg +100·Jrot_s"
+    assert sorted(sol.combinations) == ["Jrot_s", "m_leg"]
+    value = dict(zip(sol.names, sol.values, strict=True))
+    expect = dict(zip(sol.names, sol.combination_of(Parameters(truth).vector(sol.names)),
+                      strict=True))
+    for name, std in zip(sol.names, sol.std, strict=True):
+        if name == "Jst":
+            assert value[name] == pytest.approx(expect[name], rel=0.03)
+        elif np.isfinite(std) and std > 0:
+            assert abs(value[name] - expect[name]) < 3 * std, name
+    assert value["m_leg"] == pytest.approx(truth["m_leg"] + 100 * truth["Jrot_s"], rel=0.03)
