@@ -453,8 +453,12 @@ def at_rest(pre: Preprocessed) -> np.ndarray:
 
 def held_joints(model: PlatformModel, coordinate_rates: np.ndarray) -> np.ndarray:
     """(N, E) True where a unit's own coordinate moves slower than :data:`HELD_RATE` /
-    friction_tanh_gain [rad/s]: its rows are left out of the fit (:func:`raw_system`)."""
-    return np.abs(coordinate_rates) < HELD_RATE / model.alpha
+    friction_tanh_gain [rad/s], or than its channel's own ``held`` rate (a leg's: 2 mm/s):
+    the fit locks it (:func:`raw_system`)."""
+    channels = model.layout.angle_channels
+    limit = np.array([HELD_RATE / model.alpha if channels[j].held is None else channels[j].held
+                      for j in model.coordinate_channels])
+    return np.abs(coordinate_rates) < limit
 
 
 def raw_system(model: PlatformModel, pre: Preprocessed,
@@ -466,24 +470,22 @@ def raw_system(model: PlatformModel, pre: Preprocessed,
     holds whatever torques the drives apply (speed loops holding opposing currents, a
     controller reset), which the friction model, zero at zero rate, cannot explain; a zero row
     holds for any parameters, so the rows' filter mixes nothing false into its neighbours.
-    A unit's own rows (a steered wheel's steering) are zero likewise while its joint is held,
-    its measured rate below :data:`HELD_RATE` / friction_tanh_gain. With constraints the
+    A unit's own joint (a steered wheel's steering, a leg) is locked while it is held, its
+    measured rate below :data:`HELD_RATE` / friction_tanh_gain: its own rows are zero and
+    the projection carries nothing of them into the others (``State.held``). With constraints the
     rates and accelerations are first moved onto the allowed motions
     (:meth:`PlatformModel.consistent_motion`).
     """
     st = model.state(pre.q, pre.qd, pre.angles, pre.angle_rates)
     st, qdd = model.consistent_motion(st, pre.qdd)  # (unchanged without constraints)
+    if model.n_dof > 3:  # a unit's own joint held: locked (its own rows vanish)
+        st.held = held_joints(model, pre.angle_rates[:, model.coordinate_channels])
     a = model.a_id_ext(st, qdd, friction)
     b = model.b_id(st, pre.tau)  # b_ID = B_τ τ (eq. 35), per node delay if τ has them
     rest = at_rest(pre)
     if rest.any():
         a[rest] = 0.0
         b[rest] = 0.0
-    if model.n_dof > 3:  # a unit's own rows while its joint is held
-        own_rates = pre.angle_rates[:, model.coordinate_channels]
-        sample, coord = np.nonzero(held_joints(model, own_rates))
-        a[sample, 3 + coord] = 0.0
-        b[sample, 3 + coord] = 0.0
     return a, b
 
 

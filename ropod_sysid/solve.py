@@ -25,6 +25,7 @@ DOF = ("x", "y", "theta")
 STRETCH_S = 2.0  # length of the stretches of a log the jackknife leaves out one at a time [s]
 MIN_STRETCHES = 4  # fewer stretches in all logs: no jackknife, the white-noise σ alone
 NULL_TOL = 1e-3  # relative size below which a null-space entry is treated as zero
+TIE_BREAK = 1e-6  # relative preference for the later parameter among near-tied dependents
 RCOND = 1e-4  # default: relative singular value below which a direction is unidentifiable
 
 
@@ -445,8 +446,11 @@ def solve(r: np.ndarray, rows: int, names: Sequence[str],
         _, _, vt = np.linalg.svd(cs)
         ns = vt[rank:].T  # (q, q - rank), scaled coordinates
         ns = np.where(np.abs(ns) >= NULL_TOL * np.abs(ns).max(axis=0), ns, 0.0)
-        # dependent parameters: the most involved ones (pivoted QR of the null space rows)
-        _, _, piv = scipy.linalg.qr(ns.T, mode="economic", pivoting=True)
+        # dependent parameters: the most involved ones (pivoted QR of the null space rows);
+        # near-ties (two columns alike once scaled: a lump) go to the later parameter, so
+        # that the same one stands for the combination from run to run, not the rounding's
+        tilt = 1.0 + TIE_BREAK * np.arange(q_free) / max(q_free, 1)
+        _, _, piv = scipy.linalg.qr((ns * tilt[:, None]).T, mode="economic", pivoting=True)
         dep = np.sort(piv[: q_free - rank])
         base = np.setdiff1d(np.arange(q_free), dep)
         n_free = ns / scale[:, None]

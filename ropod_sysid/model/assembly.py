@@ -106,6 +106,19 @@ def null_projector(g: np.ndarray, n_dof: int, margin: float = 0.0, slip: float =
     return proj
 
 
+def locked_projector(proj: np.ndarray | None, held: np.ndarray, n_dof: int) -> np.ndarray:
+    """The projector (N, D, D) onto the motions ``proj`` allows (None: all) with the own
+    coordinates ``held`` (N, E) fixed as well: P − P Eᵀ (E P Eᵀ)⁺ E P with E the unit rows of
+    the held coordinates (zero rows where not held)."""
+    n, e = held.shape
+    rows = np.zeros((n, e, n_dof))
+    rows[:, np.arange(e), 3 + np.arange(e)] = held
+    p = np.broadcast_to(np.eye(n_dof), (n, n_dof, n_dof)) if proj is None else proj
+    pe = p @ np.swapaxes(rows, 1, 2)  # (N, D, E)
+    s_inv = np.linalg.pinv(rows @ pe, rcond=1e-9, hermitian=True)
+    return p - pe @ s_inv @ np.swapaxes(pe, 1, 2)
+
+
 def consistent_constraints(g: np.ndarray, c: np.ndarray, rank: int = CONSISTENT_RANK
                            ) -> tuple[np.ndarray, np.ndarray]:
     """The constraints G q̇ = 0 (G (N, C, D)) and their right-hand side c (N, C) projected onto
@@ -168,6 +181,9 @@ class State:
     n_actuators: int
     rows: tuple[np.ndarray, ...] = ()  # per group, its rows among the D generalized coordinates
     n_dof: int = 3
+    # (N, E) own coordinates held still in a measured record (static friction holds them):
+    # identification locks them (:meth:`PlatformModel.identification_projector`)
+    held: np.ndarray | None = None
 
     @property
     def b_tau(self) -> np.ndarray:
@@ -595,13 +611,21 @@ class PlatformModel:
         return rows if proj is None else np.einsum("nij,nj...->ni...", proj, rows)
 
     def identification_projector(self, st: State) -> np.ndarray | None:
-        """P (N, D, D) for rows built from measured angles (None: unconstrained): the
-        constraint forces removed, and the base rows left out near singular configurations
-        and where the wheels slip (:func:`null_projector` with :data:`SINGULAR_MARGIN`,
-        :data:`SLIP_MARGIN`)."""
+        """P (N, D, D) for rows built from measured angles (None: unconstrained and nothing
+        held): the constraint forces removed, and the base rows left out near singular
+        configurations and where the wheels slip (:func:`null_projector` with
+        :data:`SINGULAR_MARGIN`, :data:`SLIP_MARGIN`). Own coordinates held still
+        (``st.held``) are locked: a joint that static friction holds carries an unknown force,
+        a constraint force like the others, so its direction is projected out too
+        (:func:`locked_projector`; its own row then vanishes, and so does what the other
+        constraints' projection would carry of it into the base rows, as for a leg whose
+        lateral rows hold its rate)."""
         con = self.constraints(st, exact=True)
-        return None if con is None else null_projector(con[0], self.n_dof, SINGULAR_MARGIN,
+        proj = None if con is None else null_projector(con[0], self.n_dof, SINGULAR_MARGIN,
                                                        SLIP_MARGIN, self.motion_rank or 0)
+        if st.held is not None and np.any(st.held):
+            proj = locked_projector(proj, st.held, self.n_dof)
+        return proj
 
     @staticmethod
     def _shared_spots(spots: list[tuple[np.ndarray | slice, np.ndarray | slice]]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import base64
 import multiprocessing
 import os
+import pickle
 import queue
 import signal
 import sys
@@ -64,7 +65,7 @@ PARENT_CHECK_S = 1.0  # how often an idle drawing process checks that its parent
 
 
 def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
-    """Do the work of ``tasks`` ((id, function, args); None ends) into the connection
+    """Do the work of ``tasks`` ((id, function, args), pickled; None ends) into the connection
     ``results`` (shared: sent under ``lock``); after ``stop`` is set, or when this process's
     parent has ended, draw nothing more."""
     parent = os.getppid()
@@ -84,7 +85,7 @@ def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
             return
         if stop.is_set():
             continue
-        key, func, args = task
+        key, func, args = pickle.loads(task)
         try:
             drawn = func(*args)
         except Exception as exc:  # raised in the parent where the figure is used
@@ -93,7 +94,11 @@ def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
             except Exception:  # an exception that does not pickle
                 send((key, False, RuntimeError(f"{type(exc).__name__}: {exc}")))
         else:
-            send((key, True, drawn))
+            try:
+                send((key, True, drawn))
+            except Exception as exc:  # a result that does not pickle: the parent must hear
+                send((key, False, RuntimeError(f"{func.__name__}: its result cannot be "
+                                               f"sent ({type(exc).__name__}: {exc})")))
 
 
 def _painter(tasks: Any, results: Any, lock: Any, stop: Any, workers: int, warm: bool,
@@ -220,8 +225,11 @@ class Painter:
         if self.pool is None:
             return Pending(func(*args))
         key = self._next
+        # pickled here, not by the queue's feeder thread: work that does not pickle raises in
+        # the caller instead of never reaching a worker (which the caller would wait for)
+        task = pickle.dumps((key, func, args), protocol=pickle.HIGHEST_PROTOCOL)
         self._next += 1
-        self._tasks.put((key, func, args))
+        self._tasks.put(task)
         return Pending(wait=lambda: self._result(key))
 
     def draw(self, name: str, *args: Any) -> Drawn:

@@ -55,7 +55,7 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
                     ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A_ID,ext (M, D, p) at M samples with unit angles (M, J) (chunked to bound the memory);
     the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a); a unit's own
-    rows are zero while its joint is held, as the fit leaves them out. With ``noise`` = (true
+    joint is locked while it is held, as the fit locks it. With ``noise`` = (true
     parameters, :class:`~ropod_sysid.noise.SensorNoise`) also the rows' variances (M, D)
     (:func:`~ropod_sysid.noise.row_variances`) and the error gram of A per row kind (3, p, p)
     (:func:`~ropod_sysid.noise.regressor_error_gram`, :func:`~ropod_sysid.noise.kind_grams`)."""
@@ -66,13 +66,13 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
         st = model.state(q[sl], qd[sl], angles[sl])  # type: ignore[attr-defined]
-        a = model.a_id_ext(st, qdd[sl], friction)  # type: ignore[attr-defined]
         held = None
-        if qd.shape[1] > 3:  # the fit leaves out a unit's own rows while its joint is held
+        if qd.shape[1] > 3:  # the fit locks a unit's own joint while it is held
             from ropod_sysid.regressor import held_joints
 
-            held = np.nonzero(held_joints(model, qd[sl, 3:]))  # type: ignore[arg-type]
-            a[held[0], 3 + held[1]] = 0.0
+            st.held = held_joints(model, qd[sl, 3:])  # type: ignore[arg-type]
+            held = np.nonzero(st.held)
+        a = model.a_id_ext(st, qdd[sl], friction)  # type: ignore[attr-defined]
         out.append(a)
         if noise is not None:
             v = row_variances(model, st, noise[0], noise[1], friction)  # type: ignore[arg-type]

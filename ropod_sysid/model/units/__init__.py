@@ -54,7 +54,10 @@ class Channel:
 
     ``template`` is the CSV column with ``{u}`` for the unit name (``phi_{u}L``); ``field`` the
     key of the unit's entry in a JSON MCAP message (``phi_L``); ``wrapped`` marks an angle that
-    may be logged modulo 2π (a pivot or steering angle) and is unwrapped before smoothing.
+    may be logged modulo 2π (a pivot or steering angle) and is unwrapped before smoothing;
+    ``held``: the rate below which an own coordinate counts as held still and the fit locks
+    it (None: :data:`ropod_sysid.regressor.HELD_RATE` / friction_tanh_gain, for encoders
+    whose counts make a slow joint's rate unreliable).
     """
 
     template: str
@@ -62,6 +65,7 @@ class Channel:
     unit: str
     description: str
     wrapped: bool = False
+    held: float | None = None  # below this rate [unit/s] a joint counts as held (None: the fit's)
 
     def column(self, unit: str) -> str:
         """The CSV column of this channel for the unit named ``unit``."""

@@ -73,8 +73,9 @@ from ropod_sysid.model.units import (
     series,
 )
 
+LEG_HELD = 0.002  # [m/s]: a leg slower than this is held (by static friction): locked
 LEG_CHANNEL = Channel("leg_{u}", "leg", "m", "leg extension lambda (attachment point hip + "
-                      "lambda * axis)")
+                      "lambda * axis)", held=LEG_HELD)
 LEG_KEYS = ("hip", "axis", "range")
 LEG_GAIN = 2.0  # [1/s]: the commanded leg rate corrects the extension's error at this rate
 LEG_RATE_MAX = 0.1  # [m/s]: planned leg rates stay below this
@@ -208,6 +209,16 @@ class LegData:
         return self.wheel.actuator_rate
 
 
+def _rate(lam: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """dλ/dt (V, N) of extensions (V, N) at times t (N,): second-order differences, exactly 0
+    where a leg holds (differences over uneven steps leave 1e-15 of a constant, which column
+    scaling would make look like excitation)."""
+    if lam.shape[1] < 2:
+        return np.zeros_like(lam)
+    rate = np.gradient(lam, t, axis=1)
+    return np.where(np.ptp(lam, axis=1, keepdims=True) == 0.0, 0.0, rate)
+
+
 def _turn(v: np.ndarray) -> np.ndarray:
     """S v: vectors (…, 2) turned by 90°."""
     return np.stack([-v[..., 1], v[..., 0]], axis=-1)
@@ -338,32 +349,38 @@ class LeggedUnits:
                 raise ValueError("a leg needs its extension rate (measured or a state)")
             lam_rate = lam_rate_meas
         n, e = q.shape[0], self.n_own
-        theta, omega = q[:, 2], qd[:, 2]
-        a_w = _rotate(theta, self.axis)  # â (world)
-        d_w = lam[:, None] * a_w  # R λ a
-        p_w = _rotate(theta, self.hip) + d_w  # R P
-        t = np.zeros((n, 3 + e, 4 + e))
+        omega = qd[:, 2]
+        c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+        (ax, ay), (hx, hy) = self.axis, self.hip
+        awx, awy = c * ax - s * ay, s * ax + c * ay  # â = R a (world)
+        dwx, dwy = lam * awx, lam * awy  # R λ a
+        pwx, pwy = c * hx - s * hy + dwx, s * hx + c * hy + dwy  # R P
+        t = np.zeros((n, 3 + e, 4 + e))  # (L1)
         t[:, 0, 0] = t[:, 1, 1] = t[:, 2, 2] = 1.0
-        t[:, :2, 2] = _turn(d_w)
-        t[:, :2, 3 + e] = a_w
-        t[:, 3:, 3:3 + e] = np.eye(e)
-        t_dot_qd = np.zeros((n, 3 + e))
-        t_dot_qd[:, :2] = (-(omega**2)[:, None] * d_w
-                           + 2.0 * (omega * lam_rate)[:, None] * _turn(a_w))  # (L2)
-        qd_l = np.einsum("nij,nj->ni", t[:, :3, :3], qd)  # (L1)
-        qd_l[:, :2] += lam_rate[:, None] * a_w
+        t[:, 0, 2], t[:, 1, 2] = -dwy, dwx
+        t[:, 0, 3 + e], t[:, 1, 3 + e] = awx, awy
+        for k in range(e):
+            t[:, 3 + k, 3 + k] = 1.0
+        om2, cor = omega * omega, 2.0 * omega * lam_rate
+        t_dot_qd = np.zeros((n, 3 + e))  # (L2): −θ̇² R λ a + 2 θ̇ λ̇ S â
+        t_dot_qd[:, 0] = -om2 * dwx - cor * awy
+        t_dot_qd[:, 1] = -om2 * dwy + cor * awx
+        qd_l = qd.copy()  # (L1)
+        qd_l[:, 0] += -omega * dwy + lam_rate * awx
+        qd_l[:, 1] += omega * dwx + lam_rate * awy
         q_l = q.copy()
-        q_l[:, :2] += d_w
+        q_l[:, 0] += dwx
+        q_l[:, 1] += dwy
         if e:
             wheel = self.wheel.kinematics(q_l, qd_l, wheel_angles, wheel_rates,
                                           coordinate_rates=wheel_coord)
         else:
             wheel = self.wheel.kinematics(q_l, qd_l, wheel_angles, wheel_rates)
-        a_p = np.zeros((n, 2, 4 + e))
+        a_p = np.zeros((n, 2, 4 + e))  # (L6): [I₂, S R P, â]
         a_p[:, 0, 0] = a_p[:, 1, 1] = 1.0
-        a_p[:, :, 2] = _turn(p_w)
-        a_p[:, :, 3 + e] = a_w
-        a_p_dot_qd = -(omega**2)[:, None] * p_w + 2.0 * (omega * lam_rate)[:, None] * _turn(a_w)
+        a_p[:, 0, 2], a_p[:, 1, 2] = -pwy, pwx
+        a_p[:, 0, 3 + e], a_p[:, 1, 3 + e] = awx, awy
+        a_p_dot_qd = np.stack([-om2 * pwx - cor * awy, -om2 * pwy + cor * awx], axis=-1)
         return LegData(wheel, qd, lam, lam_rate, t, t_dot_qd, a_p, a_p_dot_qd)
 
     def _qd_full(self, data: LegData) -> np.ndarray:
@@ -431,10 +448,11 @@ class LeggedUnits:
                    ) -> tuple[np.ndarray, np.ndarray]:
         """(M_add, b_dir) over (q_b, own, λ) (L3, L6)."""
         m_l, b_l = self.wheel.mass_terms(data.wheel, params)
-        m = np.einsum("nri,nrs,nsj->nij", data.t, m_l, data.t)
-        b = np.einsum("nri,nr->ni", data.t, b_l - np.einsum("nrs,ns->nr", m_l, data.t_dot_qd))
+        t_t = np.swapaxes(data.t, 1, 2)
+        m = t_t @ m_l @ data.t
+        b = np.einsum("nir,nr->ni", t_t, b_l - np.einsum("nrs,ns->nr", m_l, data.t_dot_qd))
         m_leg = float(params["m_leg"])
-        m = m + m_leg * np.einsum("nri,nrj->nij", data.a_p, data.a_p)
+        m = m + m_leg * (np.swapaxes(data.a_p, 1, 2) @ data.a_p)
         b = b - m_leg * np.einsum("nri,nr->ni", data.a_p, data.a_p_dot_qd)
         return m, b
 
@@ -570,7 +588,7 @@ class LeggedUnits:
             tw_l, _ = self._leg_end_twist(t, tw, lam)
             twd_l = np.gradient(tw_l, t, axis=1) if tw.shape[1] > 1 else np.zeros_like(tw)
         pred = self._wheel_at(self.leg.middle).quasi_steady_angles(t, tw_l, twd_l)
-        rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+        rate = _rate(lam, t)
         ang = np.concatenate([pred.angles.reshape(*tw.shape[:2], -1), lam[..., None]], axis=-1)
         rates = np.concatenate([pred.rates.reshape(*tw.shape[:2], -1), rate[..., None]],
                                axis=-1)
@@ -583,7 +601,7 @@ class LeggedUnits:
         """The base-frame twists (V, N, 3) of the leg-end frame moved to the leg's middle
         attachment point (what :meth:`_wheel_at` its middle sees) for base twists (V, N, 3)
         and extensions λ (V, N), and λ̇ (V, N)."""
-        rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+        rate = _rate(lam, t)
         tw_l = tw.copy()
         tw_l[..., :2] += tw[..., 2:3] * _turn((lam - self.leg.middle)[..., None] * self.axis)
         tw_l[..., :2] += rate[..., None] * self.axis
@@ -604,7 +622,7 @@ class LeggedUnits:
             rate = acc = np.zeros(tw.shape[:2])
         else:
             lam_d = lam
-            rate = np.gradient(lam, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
+            rate = _rate(lam, t)
             acc = np.gradient(rate, t, axis=1) if lam.shape[1] > 1 else np.zeros_like(lam)
         leg = tuple(np.swapaxes(a, 0, 1) for a in (lam_d, rate, acc))
         if not hasattr(self.wheel, "controller_plan"):
@@ -690,7 +708,9 @@ def legged(wheel_type: Any) -> type[LeggedUnits]:
     bases: tuple[type, ...] = (LeggedUnits,)
     if hasattr(wheel_type, "constraint_jacobian"):
         bases = (_Constrained, LeggedUnits)
-    return type(f"Legged{wheel_type.__name__}", bases, attrs)
+    cls = type(f"Legged{wheel_type.__name__}", bases, attrs)
+    globals()[cls.__name__] = cls  # found by name, as pickle looks classes up
+    return cls
 
 
 class _Constrained:
