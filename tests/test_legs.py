@@ -21,6 +21,7 @@ from ropod_sysid.platform import load_platform, platform_from_dict
 from ropod_sysid.simulate import derivatives, rk4_step
 from ropod_sysid.trajectory import check, read_trajectory_csv, typical
 from ropod_sysid.trajectory.limits import Limits
+from ropod_sysid.trajectory.prediction import predict_angles
 
 R = 0.1
 SETTINGS = {"name": "justin", "wheel_radius": R, "torque_constant": 2.0,
@@ -349,3 +350,68 @@ def test_the_shipped_leg_sample_is_fitted_within_its_sigma() -> None:
         elif np.isfinite(std) and std > 0:
             assert abs(value[name] - expect[name]) < 3 * std, name
     assert value["m_leg"] == pytest.approx(truth["m_leg"] + 100 * truth["Jrot_s"], rel=0.03)
+
+
+def test_a_leg_that_cancels_the_base_at_its_wheel_is_flagged() -> None:
+    """002 §III-C's leg case of a type-A singularity: the base translating along a leg's axis
+    while that leg retracts at the same speed leaves its wheel at rest (its steering angle
+    undefined): the prediction flags that unit there and nowhere else; a held leg is not."""
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    model = PlatformModel(platform)
+    t = np.linspace(0.0, 2.0, 201)
+    speed = 0.1
+    axis = np.array([S2, S2])  # unit 1's leg
+    twist = np.zeros((1, t.size, 3))
+    twist[0, :, :2] = speed * axis
+    legs = np.full((1, t.size, 4), 0.465)
+    legs[0, :, 0] = 0.465 - speed * (t - 1.0)  # retracting as fast as the base moves
+    pred = predict_angles(t, twist, model, planned=legs)
+    flag = pred.flags["wheel at rest (type A)"][0]
+    assert flag[5:-5, 0].all() and not flag[:, 1:].any()
+    held = predict_angles(t, twist, model)
+    assert not held.flags["wheel at rest (type A)"].any()
+
+
+def test_cli_simulates_the_planned_legs_and_converts_their_logs(tmp_path: Path) -> None:
+    """``simulate`` reads a setpoint CSV's ``leg_u`` columns and drives the legs to them
+    through the wheels (each within 1 cm of its plan over a short, quick run); ``convert`` carries
+    the extensions through a JSON MCAP and back exactly; ``inspect`` shows their range."""
+    from click.testing import CliRunner
+
+    from ropod_sysid.cli.main import main
+
+    t = np.linspace(0.0, 0.6, 31)
+    x = np.clip(t / 0.3, 0.0, 1.0)
+    ramp = x**3 * (10 - 15 * x + 6 * x * x)
+    rows = ["t,vx,vy,omega,leg_1,leg_2,leg_3,leg_4"]
+    plan = 0.465 + 0.012 * ramp
+    rows += [f"{a},{0.2 * r},0,{0.1 * r},{p},{p},0.465,{2 * 0.465 - p}"
+             for a, r, p in zip(t, ramp, plan, strict=True)]
+    traj = tmp_path / "run.csv"
+    traj.write_text("\n".join(rows) + "\n")
+    run = CliRunner()
+    out = tmp_path / "log.csv"
+    res = run.invoke(main, ["simulate", "--platform", str(LEGS_DATA / "platform.yaml"),
+                            "--params", str(LEGS_DATA / "truth.json"), "--trajectory",
+                            str(traj), "--out", str(out), "--rate", "250",
+                            "--torque-limit", "30", "--steer-kp", "10", "--steer-ki", "200",
+                            "--steer-torque-limit", "28", "--quiet"])
+    assert res.exit_code == 0, res.output
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    log = read_log(out, platform)
+    legs = log.angles[:, [platform.layout.angle_names.index(f"leg_{u}") for u in "1234"]]
+    want = np.stack([np.interp(log.t, t, c) for c in (plan, plan, np.full(t.size, 0.465),
+                                                      2 * 0.465 - plan)], axis=1)
+    assert np.abs(legs - want).max() < 0.01  # 8.6 mm: passive legs, pushed by the base's
+    # acceleration and held only through the wheels' loops
+    assert np.ptp(legs[:, 0]) > 0.008  # the legs did move
+    mcap = tmp_path / "log.mcap"
+    back = tmp_path / "back.csv"
+    for src, dst in ((out, mcap), (mcap, back)):
+        res = run.invoke(main, ["convert", str(src), str(dst), "--platform",
+                                str(LEGS_DATA / "platform.yaml"), "--quiet"])
+        assert res.exit_code == 0, res.output
+    again = read_log(back, platform)
+    assert np.array_equal(again.angles, log.angles) and np.array_equal(again.t, log.t)
+    res = run.invoke(main, ["inspect", str(out), "--platform", str(LEGS_DATA / "platform.yaml")])
+    assert res.exit_code == 0 and "leg_1" in res.output, res.output

@@ -40,7 +40,7 @@ from ropod_sysid.trajectory.limits import (
 from ropod_sysid.trajectory.precheck import stacked_regressor
 from ropod_sysid.trajectory.prediction import _variant_prediction, predict_angles
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, _off_floor, variants
-from ropod_sysid.trajectory.setpoints import Trajectory
+from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
 
 OPTIMIZE_DURATION = (5.0, 600.0)  # optimize(): shortest and longest run [s]
 MAX_HARMONICS = 20  # optimize(): most harmonics of each Fourier series
@@ -411,6 +411,10 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
         chosen = good[best]
     coef, traj, s_v, value = chosen
     model = PlatformModel(platform)
+    if model.planned_columns:  # legs: typical's plan on the chosen base motion (the search
+        traj = with_planned(traj, platform, seed)  # itself holds them)
+        notes.append("the legs' extensions are planned as trajectory typical plans them; the "
+                     "search optimised the base motion with the legs held")
     cond = conditioning(stacked_regressor(*_variant_prediction(traj, model), model,
                                           friction)[0])
     out = OptimizeResult(traj, objective, value, cond.condition_number, cond.rank,

@@ -219,6 +219,17 @@ def _rate(lam: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.ptp(lam, axis=1, keepdims=True) == 0.0, 0.0, rate)
 
 
+def _with_lead(pred: AnglePrediction, lead: tuple[int, ...]) -> AnglePrediction:
+    """A prediction over V = prod(lead) series (V, N, …) reshaped to (…lead, N, …)."""
+
+    def shaped(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else a.reshape(*lead, *a.shape[1:])
+
+    return AnglePrediction(shaped(pred.angles), shaped(pred.rates), shaped(pred.actuator),  # type: ignore[arg-type]
+                           shaped(pred.turning), {k: shaped(v) for k, v in pred.flags.items()},  # type: ignore[misc]
+                           shaped(pred.lag))
+
+
 def _turn(v: np.ndarray) -> np.ndarray:
     """S v: vectors (…, 2) turned by 90°."""
     return np.stack([-v[..., 1], v[..., 0]], axis=-1)
@@ -528,18 +539,18 @@ class LeggedUnits:
         rates = np.concatenate([pred.rates.reshape(*tw.shape[:2], -1), lam_rate[..., None]],
                                axis=-1)
         flags = dict(pred.flags)
-        # 002 §III-C: a wheel at rest while the base moves (type A: its steering undefined)
+        # 002 §III-C, the leg's case: the base moves the wheel, the leg's own motion cancels
+        # it, and the wheel stands (type A: its steering undefined); where the base itself
+        # leaves the wheel at rest (the centre of rotation on it) the wheel type plans
         mid = self.leg.point(self.leg.middle)
+        ex, ey = (lam - self.leg.middle) * self.axis[0], (lam - self.leg.middle) * self.axis[1]
+        base = np.hypot(tw[..., 0] - tw[..., 2] * (mid[1] + ey),
+                        tw[..., 1] + tw[..., 2] * (mid[0] + ex))
         centre = np.hypot(tw_l[..., 0] - tw_l[..., 2] * mid[1],
                           tw_l[..., 1] + tw_l[..., 2] * mid[0])
-        moving = np.hypot(tw[..., 0], tw[..., 1]) + np.abs(tw[..., 2]) * np.hypot(*mid) > (
-            REST_SPEED)
-        flags[TYPE_A] = (moving & (centre < REST_SPEED))[..., None]
-        return AnglePrediction(ang.reshape(*lead, *ang.shape[1:]),
-                               rates.reshape(*lead, *rates.shape[1:]),
-                               pred.actuator, pred.turning,
-                               {k: v.reshape(*lead, *v.shape[1:]) for k, v in flags.items()},
-                               pred.lag)
+        flags[TYPE_A] = ((base >= REST_SPEED) & (centre < REST_SPEED))[..., None]
+        return _with_lead(AnglePrediction(ang, rates, pred.actuator, pred.turning, flags,
+                                          pred.lag), lead)
 
     def plan_coordinates(self, t: np.ndarray, twists: np.ndarray, seed: int = 0,
                          rate_max: float = LEG_RATE_MAX) -> dict[str, np.ndarray]:
@@ -548,10 +559,11 @@ class LeggedUnits:
         frequency and phase of its own per unit (so that the legs' masses and frictions
         separate), on a progress s that advances only while the base moves: ṡ = a minimum-jerk
         step of (speed − :data:`LEG_START_SPEED`) / (:data:`LEG_SPEED_RATIO` · A 2π f)
-        clipped to [0, 1], the speed that of the attachment point's base motion at its
-        middle (|v| + |ω| |P|). So the leg moves slower than that speed / LEG_SPEED_RATIO, no
-        wheel comes to rest while the base moves (002 §III-C, type A), the legs stand still
-        while the base is slow, and λ stays within its range; the rate is at most
+        clipped to [0, 1], the speed that of the base's motion at the leg's middle point
+        (|v + ω × P|, the slower of the run and its mirrored variant). So the leg moves slower
+        than that speed / LEG_SPEED_RATIO, no wheel comes to rest where the base moves it
+        (002 §III-C, type A: up to the leg's excursion from its middle point), the legs stand
+        still while the base is slow there, and λ stays within its range; the rate is at most
         ``rate_max`` [m/s]."""
         t = np.asarray(t, float)
         tw = np.asarray(twists, float).reshape(t.size, 3)
@@ -559,8 +571,11 @@ class LeggedUnits:
         rng = np.random.default_rng([zlib.crc32(self.spec.name.encode()), seed])
         freq = 0.8 * rate_max / (2 * np.pi * amp) * rng.uniform(0.6, 1.0)
         phase = rng.uniform(0, 2 * np.pi)
-        reach = float(np.hypot(*self.leg.point(self.leg.middle)))
-        speed = np.hypot(tw[:, 0], tw[:, 1]) + np.abs(tw[:, 2]) * reach
+        px, py = self.leg.point(self.leg.middle)
+        # the base's velocity at the leg's middle point, the slower of a run and its mirror
+        # (v_y, ω → −v_y, −ω; the negated variants are as fast): its four variants share the plan
+        speed = np.minimum(np.hypot(tw[:, 0] - tw[:, 2] * py, tw[:, 1] + tw[:, 2] * px),
+                           np.hypot(tw[:, 0] + tw[:, 2] * py, -tw[:, 1] - tw[:, 2] * px))
         x = np.clip((speed - LEG_START_SPEED) / (LEG_SPEED_RATIO * amp * 2 * np.pi * freq),
                     0.0, 1.0)
         gate = x**3 * (10.0 - 15.0 * x + 6.0 * x * x)  # minimum-jerk: smooth on and off
@@ -592,9 +607,8 @@ class LeggedUnits:
         ang = np.concatenate([pred.angles.reshape(*tw.shape[:2], -1), lam[..., None]], axis=-1)
         rates = np.concatenate([pred.rates.reshape(*tw.shape[:2], -1), rate[..., None]],
                                axis=-1)
-        return AnglePrediction(ang.reshape(*lead, *ang.shape[1:]),
-                               rates.reshape(*lead, *rates.shape[1:]), pred.actuator,
-                               pred.turning, pred.flags, pred.lag)
+        return _with_lead(AnglePrediction(ang, rates, pred.actuator, pred.turning,
+                                          dict(pred.flags), pred.lag), lead)
 
     def _leg_end_twist(self, t: np.ndarray, tw: np.ndarray, lam: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
