@@ -14,7 +14,7 @@ extensions, as ``ropod-sysid trajectory typical --platform datasets/legs/platfor
 low-level control: PI speed loops on the drives (kp 20 N m s/rad, ki 200 N m/rad, 30 N m
 limit) and PD loops on the steering angles (D 10 N m s/rad, P 200 N m/rad, 28 N m limit), the
 wheels' rates and angles from the kinematic model for the base twist and the legs' planned
-rates. ``platform.yaml`` (with its comments) is read, not written. Takes about five minutes.
+rates. ``platform.yaml`` (with its comments) is read, not written. Takes about two minutes.
 """
 
 from __future__ import annotations
