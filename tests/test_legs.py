@@ -22,6 +22,7 @@ from ropod_sysid.simulate import derivatives, rk4_step
 from ropod_sysid.trajectory import check, read_trajectory_csv, typical
 from ropod_sysid.trajectory.limits import Limits
 from ropod_sysid.trajectory.prediction import predict_angles
+from tests.test_steered import advanced
 
 R = 0.1
 SETTINGS = {"name": "justin", "wheel_radius": R, "torque_constant": 2.0,
@@ -254,14 +255,6 @@ def test_kane_equations_and_virtual_power_equal_the_model(wheel: str) -> None:
     tau = rng.normal(size=(3, model.layout.n_currents))
     power = (tau * st.actuator_rate).sum(axis=1)
     assert np.allclose(np.einsum("nda,na,nd->n", st.b_tau, tau, qd), power)
-
-
-def advanced(model: PlatformModel, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
-             h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pose and angles moved along q̇ for a time h (own coordinates with their rates)."""
-    ang = angles.copy()
-    ang[:, model.coordinate_channels] += h * qd[:, 3:]
-    return q + h * qd[:, :3], ang
 
 
 def test_energy_is_conserved_while_the_legs_slide() -> None:
