@@ -123,12 +123,14 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     names = ("vx", "vy", "omega")
     vel_ranges = {k: ((float(np.percentile(vel[:, j], 1)), float(np.percentile(vel[:, j], 99)))
                       if vel.shape[0] else (0.0, 0.0)) for j, k in enumerate(names)}
-    coverage = {}  # per unit with a turning joint (a wrapped angle: a swivel's pivot)
+    coverage = {}  # per unit with a turning joint (a wrapped angle: a swivel's pivot, a steering)
+    joint = {}  # its column
     lay = log.layout
     for j in np.flatnonzero(lay.wrapped):
         wrapped = np.mod(log.angles[:, j], 2 * np.pi)
         bins = np.unique(np.floor(wrapped / (2 * np.pi) * 36).astype(int))
         coverage[lay.units[lay.angle_unit[j]]] = 10.0 * float(bins.size)
+        joint[lay.units[lay.angle_unit[j]]] = lay.angle_names[j]
 
     reasons = []
     short = motion_shortfall(moving_time, "of motion", c)
@@ -148,7 +150,8 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
                        "so that the wheels' axles cross away from the line through them")
     low = [u for u, deg in coverage.items() if deg < c.min_pivot_coverage]
     if low:
-        reasons.append(f"pivot{'s' if len(low) > 1 else ''} {', '.join(low)} turn through less "
+        reasons.append(f"{', '.join(joint[u] for u in low)} turn{'' if len(low) > 1 else 's'} "
+                       "through less "
                        f"than {c.min_pivot_coverage:g}° (min "
                        f"{min(coverage[u] for u in low):.0f}°); change the driving direction more")
     notes_w = []

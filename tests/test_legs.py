@@ -259,7 +259,7 @@ def test_kane_equations_and_virtual_power_equal_the_model(wheel: str) -> None:
 
 def test_energy_is_conserved_while_the_legs_slide() -> None:
     """No torque, no friction: the platform coasting with its legs sliding (q̇ in the null
-    space of the constraints, every λ̇ ≠ 0) keeps its kinetic energy (RK4, 1 ms, 0.5 s) and
+    space of the constraints, every λ̇ ≠ 0) keeps its kinetic energy (RK4, 1 ms, 0.3 s) and
     its constraints, and the legs do move."""
     model = PlatformModel(platform_from_dict(justin(), "<p>"))
     params = Parameters(TRUTH)
@@ -275,17 +275,18 @@ def test_energy_is_conserved_while_the_legs_slide() -> None:
     tau = np.zeros((1, model.layout.n_currents))
     e0 = model.kinetic_energy(model.state(q, qd, angles), params)[0]
     lam0 = angles[0, LEG_COLS].copy()
-    worst = 0.0
-    for _ in range(500):
+    worst, moved = 0.0, np.zeros(4)
+    for _ in range(300):
         q, qd, angles = rk4_step(
             lambda *y: derivatives(model, params, "per-wheel", *y[:3], y[3]),
             (q, qd, angles), 1e-3, (tau,) * 4)
         g, _ = model.constraints(model.state(q, qd, angles), exact=True)
         worst = max(worst, float(np.abs(np.einsum("ncd,nd->nc", g, qd)).max()))
+        moved = np.maximum(moved, np.abs(angles[0, LEG_COLS] - lam0))
     e1 = model.kinetic_energy(model.state(q, qd, angles), params)[0]
     assert abs(e1 - e0) < 1e-7 * e0
     assert worst < 1e-7
-    assert np.abs(angles[0, LEG_COLS] - lam0).min() > 0.01
+    assert moved.min() > 0.01  # every leg slid by a centimetre or more
 
 
 LEGS_DATA = Path(__file__).resolve().parent.parent / "datasets" / "legs"
