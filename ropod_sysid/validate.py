@@ -111,6 +111,16 @@ FREE_RUN_STEP = 1e-3  # longest integration step of the free-running simulation 
 # run covers the first log's first FREE_RUN_NUMPY_S
 FREE_RUN_NUMPY_STEP = 2e-3
 FREE_RUN_NUMPY_S = 5.0
+# ... for platforms of up to this many unit groups; each group costs its Python overhead per
+# step (a legged unit is a group of its own), so more groups cover proportionally less
+FREE_RUN_NUMPY_GROUPS = 2
+
+
+def numpy_free_run_seconds(model: PlatformModel) -> float:
+    """How much of the first log the report's free run covers on the numpy path [s]:
+    :data:`FREE_RUN_NUMPY_S`, shortened for platforms of more than
+    :data:`FREE_RUN_NUMPY_GROUPS` unit groups (four units on legs: 2.5 s)."""
+    return FREE_RUN_NUMPY_S * min(1.0, FREE_RUN_NUMPY_GROUPS / max(len(model.groups), 1))
 
 
 def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,

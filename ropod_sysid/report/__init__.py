@@ -72,10 +72,10 @@ from ropod_sysid.summary import (
 )
 from ropod_sysid.validate import (
     FORCE_THRESHOLD,
-    FREE_RUN_NUMPY_S,
     TORQUE_THRESHOLD,
     base_frame,
     fit_percentage,
+    numpy_free_run_seconds,
     runs_compiled,
     simulated_velocity,
     validate_logs,
@@ -302,14 +302,15 @@ def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
 def free_run_view(platform: Platform, params: DynamicParameters, plot: LogPlot, first: bool
                   ) -> tuple[dict[str, float] | None, float | None, bytes | None]:
     """A log's free run (every log where it is compiled, else the first log's first
-    :data:`FREE_RUN_NUMPY_S`): its fit % per DOF, the time it covers [s] and, on the first
-    log, its figure (PNG); all None where there is none. Done by a painter's worker."""
+    :func:`~ropod_sysid.validate.numpy_free_run_seconds`): its fit % per DOF, the time it
+    covers [s] and, on the first log, its figure (PNG); all None where there is none. Done by
+    a painter's worker."""
     model = PlatformModel(platform)
     compiled = runs_compiled(model, params, plot.t_rows)
     if plot.state_rows is None or len(plot.t_rows) <= 2 or not (compiled or first):
         return None, None, None
     predicted = simulated_velocity(model, params, plot.t_rows, plot.qd_rows, plot.state_rows,
-                                   None if compiled else FREE_RUN_NUMPY_S)
+                                   None if compiled else numpy_free_run_seconds(model))
     measured = base_frame(plot.state_rows[0][:, 2], plot.qd_rows)
     fit_pct = dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured, predicted)),
                        strict=True))
