@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
 from ropod_sysid.params import thesis_fixed_masses
 from ropod_sysid.platform import Platform, ropod_platform
 from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already: reports
+    os.environ.setdefault("ROPOD_SYSID_DRAWERS", "1")  # draw in-process (Painter(2) is tested)
 
 # attachment points moved off the symmetric square by 1–3 cm (thesis Sec. VI-C)
 OFF_SQUARE = np.array([[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]])

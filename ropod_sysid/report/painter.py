@@ -35,9 +35,17 @@ def png_uri(data: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
+DRAWERS_ENV = "ROPOD_SYSID_DRAWERS"  # the number of drawing processes, if set (1: in-process)
+
+
 def default_workers() -> int:
-    """Processes that draw the figures: 2 where this process may run on two CPUs or more and
-    can fork, else 1 (this process)."""
+    """Processes that draw the figures: the environment's :data:`DRAWERS_ENV` when set (a
+    whole number ≥ 1; e.g. 1 where other processes already use every CPU, as parallel test
+    workers do), else 2 where this process may run on two CPUs or more and can fork, else 1
+    (this process)."""
+    given = os.environ.get(DRAWERS_ENV, "").strip()
+    if given.isdigit() and int(given) >= 1:
+        return int(given) if "fork" in multiprocessing.get_all_start_methods() else 1
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
