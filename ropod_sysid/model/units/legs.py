@@ -72,6 +72,7 @@ from ropod_sysid.model.units import (
     integrated,
     series,
 )
+from ropod_sysid.model.units.entry import unit_name
 from ropod_sysid.model.units.leg_entry import LeggedSpec, parse_leg
 
 LEG_HELD = 0.002  # [m/s]: a leg slower than this is held (by static friction): locked
@@ -188,7 +189,8 @@ class LeggedUnits:
     def parse_entry(cls, entry: Mapping[str, Any], k: int, where: str,
                     defaults: Mapping[str, float]) -> LeggedSpec:
         """A wheel entry with ``leg:``: the wheel attached at the leg's hip."""
-        name = entry.get("name", "?")
+        name = unit_name(entry, k, where, '{name: "1", type: steered, leg: {hip: [x, y], '
+                         'axis: [ex, ey], range: [lmin, lmax]}}')
         at = f"{where}: 'units[{k}]' (unit '{name}')"
         leg = parse_leg(entry, at)
         key = cls.wheel_type.attachment_key
