@@ -126,7 +126,9 @@ def test_a_constant_leg_is_the_fixed_attachment_model() -> None:
     """With every leg held (λ̇ = 0) at one extension the legged model restricted to (q_b, β)
     is the fixed steered platform at P = hip + λ a whose base carries the four leg masses
     (m_b + 4 m_leg, J_zz,b + m_leg Σ|P|²: the points are symmetric), to 1e-12: M_dir, b_dir,
-    B_τ, the constraints, the identification columns and the kinetic energy."""
+    B_τ, the friction torques, the constraints, M_dir q̈ − b_dir and the kinetic energy (the
+    identification columns are those equations' coefficients:
+    :func:`test_regressor_is_linear_in_the_parameters`)."""
     lam = 0.43
     legged = PlatformModel(platform_from_dict(justin(), "<legs>"))
     pts = [[sx * (0.1 + lam * S2), sy * (0.1 + lam * S2)] for _, sx, sy in CORNERS]

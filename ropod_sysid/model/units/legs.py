@@ -140,13 +140,6 @@ def _turn(v: np.ndarray) -> np.ndarray:
     return np.stack([-v[..., 1], v[..., 0]], axis=-1)
 
 
-def _rotate(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """R(θ) v for θ (N,) and v (2,) or (N, 2)."""
-    c, s = np.cos(theta), np.sin(theta)
-    v = np.broadcast_to(v, (theta.shape[0], 2))
-    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
-
-
 class LeggedUnits:
     """One wheel unit of type ``wheel_type`` on a leg (the class is made per wheel type by
     :func:`legged`)."""
@@ -282,12 +275,7 @@ class LeggedUnits:
         t_dot_qd = np.zeros((n, 3 + e))  # (L2): −θ̇² R λ a + 2 θ̇ λ̇ S â
         t_dot_qd[:, 0] = -om2 * dwx - cor * awy
         t_dot_qd[:, 1] = -om2 * dwy + cor * awx
-        qd_l = qd.copy()  # (L1)
-        qd_l[:, 0] += -omega * dwy + lam_rate * awx
-        qd_l[:, 1] += omega * dwx + lam_rate * awy
-        q_l = q.copy()
-        q_l[:, 0] += dwx
-        q_l[:, 1] += dwy
+        q_l, qd_l = self.leg_kinematics(q, qd, lam, lam_rate)  # (L1)
         if e:
             wheel = self.wheel.kinematics(q_l, qd_l, wheel_angles, wheel_rates,
                                           coordinate_rates=wheel_coord)
@@ -316,11 +304,14 @@ class LeggedUnits:
         and extensions λ, λ̇ (N,) (L1)."""
         q = np.asarray(q, float)
         qd = np.asarray(qd, float)
-        a_w = _rotate(q[:, 2], self.axis)
+        c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+        awx, awy = c * self.axis[0] - s * self.axis[1], s * self.axis[0] + c * self.axis[1]
         q_l = q.copy()
-        q_l[:, :2] += lam[:, None] * a_w
-        qd_l = qd.copy()
-        qd_l[:, :2] += qd[:, 2:3] * _turn(lam[:, None] * a_w) + lam_rate[:, None] * a_w
+        q_l[:, 0] += lam * awx
+        q_l[:, 1] += lam * awy
+        qd_l = qd.copy()  # ṙ + θ̇ S R λ a + λ̇ R a
+        qd_l[:, 0] += -qd[:, 2] * lam * awy + lam_rate * awx
+        qd_l[:, 1] += qd[:, 2] * lam * awx + lam_rate * awy
         return q_l, qd_l
 
     def actuator_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray,
