@@ -381,14 +381,19 @@ def kind_grams(per_dof: np.ndarray) -> np.ndarray:
     return np.stack([per_dof[..., kinds == k, :, :].sum(axis=-3) for k in range(3)], axis=-3)
 
 
+# detect_encoder_counts(): finer steps (under 0.4 µrad) are a writer's rounding of exact angles
+# (7 decimals: 2π/1e-7 ≈ 6.3e7 "counts"), not an encoder's, and too small to bias a fit
+MAX_DETECTED_COUNTS = 2**24
+
+
 def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None) -> int | None:
     """The counts per revolution of encoders whose angles (N, J) [rad] move by whole counts,
     or None when they do not (exact or resampled angles). The count is the smallest step of
     any channel (or its half or third, when that step is two or three counts), refined on the
     steps of up to 50 counts, accepted when 99 % of the steps are whole numbers of it (to 0.1
     count: a log written with 8 digits rounds its angles) and 2π is a whole number of it (to
-    0.1 %). ``wrapped`` (J,): channels wrapped to ±π, whose steps across the
-    wrap are taken modulo 2π."""
+    0.1 %), and at most :data:`MAX_DETECTED_COUNTS`. ``wrapped`` (J,): channels wrapped to ±π,
+    whose steps across the wrap are taken modulo 2π."""
     a = np.asarray(angles, float)
     if a.ndim != 2 or a.shape[0] < 3:
         return None
@@ -412,7 +417,8 @@ def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None)
         if np.mean(np.abs(ratio - np.round(ratio)) < 0.1) < 0.99:
             continue
         counts = 2.0 * math.pi / q
-        if abs(counts - round(counts)) < 1e-3 * counts and round(counts) >= 16:
+        if (abs(counts - round(counts)) < 1e-3 * counts
+                and 16 <= round(counts) <= MAX_DETECTED_COUNTS):
             return int(round(counts))
     return None
 

@@ -205,3 +205,20 @@ def test_the_encoder_correction_streams_like_in_memory(off_square, runs_off_squa
     np.testing.assert_allclose(e_s, e_w, rtol=1e-8, atol=1e-12 * np.abs(e_w).max())
     plain = fit_logs(logs, off_square)
     assert not np.allclose(plain.solution.values, whole.solution.values, rtol=1e-3)
+
+
+def test_encoder_counts_are_detected_from_the_angles_steps_not_from_a_writers_rounding():
+    """Angles that move by whole counts of 2π/16384 are recognised as 16384-count encoders
+    (wrapped channels taken modulo 2π); exact angles, and exact angles a log writer rounded to
+    7 decimals (2π/1e-7 ≈ 6.3e7 steps per turn, above MAX_DETECTED_COUNTS), are not."""
+    from ropod_sysid.noise import MAX_DETECTED_COUNTS, detect_encoder_counts
+
+    t = np.linspace(0.0, 10.0, 2001)[:, None]
+    # a wheel, a wrapped angle, and one turning so slowly that rounding moves it by single steps
+    exact = np.hstack([3.0 * np.sin(t) + 0.4 * t, np.angle(np.exp(2j * t)), 2e-6 * t])
+    step = 2 * np.pi / 2**14
+    wrapped = np.array([False, True, False])
+    assert detect_encoder_counts(np.round(exact / step) * step, wrapped) == 2**14
+    assert detect_encoder_counts(exact, wrapped) is None
+    assert 2 * np.pi / 1e-7 > MAX_DETECTED_COUNTS
+    assert detect_encoder_counts(np.round(exact, 7), wrapped) is None
