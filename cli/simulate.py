@@ -88,6 +88,11 @@ def control_parameters(path: str, platform: Platform) -> DynamicParameters:
               help="Encoder counts per revolution, at least 16 (default: exact angles).")
 @click.option("--current-noise", default=0.0, show_default=True,
               help="Current measurement noise, standard deviation [A].")
+@click.option("--current-average", is_flag=True,
+              help="Log each current as its mean over the log interval centred on the sample "
+                   "(an averaging current measurement, or a 1 kHz bus decimated by "
+                   "averaging); default: its value at the sample instant, which aliases the "
+                   "control loops' fast torques when --rate is below the control rate.")
 @click.option("--jitter", default=0.0, show_default=True,
               help="Timestamp jitter, half-width of a uniform distribution [s]; less than half "
                    "the sample step.")
@@ -143,8 +148,9 @@ def control_parameters(path: str, platform: Platform) -> DynamicParameters:
                 "traj_path": "--trajectory", "force_path": "--force",
                 "control_params_path": "--control-params"})
 def command(platform_path: str, params_path: str, traj_path: str, out_path: str, rate: float,
-            dt: float, encoder_counts: int | None, current_noise: float, jitter: float,
-            seed: int, force_path: str | None, kp: float, ki: float, torque_limit: float,
+            dt: float, encoder_counts: int | None, current_noise: float,
+            current_average: bool, jitter: float, seed: int, force_path: str | None,
+            kp: float, ki: float, torque_limit: float,
             steer_kp: float, steer_ki: float, steer_torque_limit: float,
             initial_angles: str, engine: str, control: str, control_params_path: str | None,
             model_kd: float, model_ki: float, quiet: bool) -> None:
@@ -155,7 +161,7 @@ def command(platform_path: str, params_path: str, traj_path: str, out_path: str,
     if control == "model" and engine == "numba":
         raise InputError("--engine numba: the compiled loop has the decentralised controllers "
                          "only; use --engine numpy or auto with --control model")
-    sensors = Sensors(encoder_counts, current_noise, jitter, seed)
+    sensors = Sensors(encoder_counts, current_noise, jitter, seed, current_average)
     controller = Controller(kp, ki, torque_limit, steer_kp, steer_ki, steer_torque_limit)
     check_run(rate, dt, controller, sensors)  # before any work
     if given("seed") and not (current_noise > 0 or jitter > 0):

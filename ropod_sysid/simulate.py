@@ -110,12 +110,17 @@ class Sensors:
     current_noise : standard deviation of the current measurement [A]
     jitter : half-width of a uniform timestamp jitter [s]
     seed : random seed
+    current_average : log each current as the mean over its log interval (the control steps
+        nearest the sample, :attr:`SimResult.tau_mean`: an averaging current measurement, or
+        a 1 kHz bus decimated by averaging) instead of its value at the sample instant (a
+        point sample, which aliases the control loops' fast torques into a slower log)
     """
 
     encoder_counts: int | None = None
     current_noise: float = 0.0
     jitter: float = 0.0
     seed: int = 0
+    current_average: bool = False
 
 
 MAX_DT = 1e-3  # the longest integration step of the simulate command [s]
@@ -178,6 +183,9 @@ class SimResult:
     tau: np.ndarray  # (N, A) applied actuator torques
     f_b: np.ndarray  # (N, 3) applied external force (base frame)
     energy: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (N,) kinetic energy
+    # (N, A) the torques' mean over the control steps nearest each sample (those of the log
+    # interval centred on it; fewer at the ends)
+    tau_mean: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def first_twist(setpoints: Setpoints) -> np.ndarray:
@@ -275,6 +283,7 @@ def simulate(platform: Platform, params: DynamicParameters,
     rec_tau = np.empty((n_rec, n_runs, n_act))
     rec_fb = np.zeros((n_rec, n_runs, 3))
     rec_e = np.empty((n_rec, n_runs))
+    rec_tau_sum = np.zeros((n_rec, n_runs, n_act))  # τ summed over the steps nearest a record
 
     def deriv(q: np.ndarray, qd: np.ndarray, angles: np.ndarray, tau: np.ndarray,
               f_b: np.ndarray | None, st: State | None = None) -> tuple[np.ndarray, ...]:
@@ -288,7 +297,7 @@ def simulate(platform: Platform, params: DynamicParameters,
                                                 axis=1)
 
     n_keep = np.floor(durations * rate + 1e-9).astype(np.int64) + 1  # log samples per run
-    records = (rec_q, rec_qd, rec_qdd, rec_ang, rec_tau, rec_fb, rec_e)
+    records = (rec_q, rec_qd, rec_qdd, rec_ang, rec_tau, rec_fb, rec_e, rec_tau_sum)
     with Progress(steps, "simulate", quiet=quiet) as bar:
         if groups is not None:
             from ropod_sysid import simulate_jit
@@ -334,6 +343,9 @@ def simulate(platform: Platform, params: DynamicParameters,
                     saturated = tau != tau_raw
                     integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
                 f_b = None if f_all is None else f_all[step]
+                near = (step + stride // 2) // stride
+                if near < n_rec:
+                    rec_tau_sum[near] += tau
                 k1 = deriv(q, qd, angles, tau, f_b, st)
                 if step % stride == 0:
                     k = step // stride
@@ -354,11 +366,14 @@ def simulate(platform: Platform, params: DynamicParameters,
     for r in range(n_runs):
         t_true = t0[r] + np.arange(n_keep[r]) / rate
         sl = (slice(0, n_keep[r]), r)
+        last = steps if groups is None else min((n_keep[r] - 1) * stride, steps)
+        count = np.bincount((np.arange(last + 1) + stride // 2) // stride, minlength=n_rec)
         res = SimResult(
             log=None,  # type: ignore[arg-type]
             q=rec_q[sl].copy(), qd=rec_qd[sl].copy(), qdd=rec_qdd[sl].copy(),
             angles=rec_ang[sl].copy(), tau=rec_tau[sl].copy(),
             f_b=rec_fb[sl].copy(), energy=rec_e[sl].copy(),
+            tau_mean=rec_tau_sum[sl] / count[:n_keep[r], None],
         )
         res.log = record(platform, res, t_true, sensors, rng, source)
         results.append(res)
@@ -418,7 +433,17 @@ def compiled_groups(model: PlatformModel, params: DynamicParameters, friction: s
 def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,
            rng: np.random.Generator, source: str) -> Log:
     """The contract log of a simulated run, with the sensor effects of ``sensors``."""
-    angles = res.angles
+    current = (res.tau_mean if sensors.current_average else res.tau) / platform.torque_constants()
+    exact = Log(t.copy(), platform.layout, np.array(res.angles), current, None, source, [])
+    return sensed(exact, platform, sensors, rng)
+
+
+def sensed(log: Log, platform: Platform, sensors: Sensors, rng: np.random.Generator) -> Log:
+    """An exact log (true angles and currents at its sample times) as its sensors record it:
+    timestamps jittered (the angles interpolated to the jittered instants), angle encoders
+    quantised to ``sensors.encoder_counts`` (a leg's extension is not an angle) and current
+    noise added; :attr:`Sensors.current_average` is the exact log's to apply."""
+    t, angles = log.t, log.angles
     t_log = t.copy()
     if sensors.jitter > 0:
         # the sample is taken at a jittered instant; the angles are those at that instant
@@ -432,10 +457,10 @@ def record(platform: Platform, res: SimResult, t: np.ndarray, sensors: Sensors,
         rad = platform.layout.encoders
         angles = np.array(angles)
         angles[:, rad] = np.round(angles[:, rad] / step) * step
-    current = res.tau / platform.torque_constants()
+    current = log.currents
     if sensors.current_noise > 0:
         current = current + rng.normal(0.0, sensors.current_noise, size=current.shape)
-    return Log(t_log, platform.layout, np.array(angles), current, None, source, [])
+    return Log(t_log, platform.layout, np.array(angles), current, None, log.source, [])
 
 
 def _interp_rows(t_new: np.ndarray, t: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -189,12 +189,15 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
         last: np.ndarray, sp_all: np.ndarray, f_all: np.ndarray, has_fb: bool, x_all: np.ndarray,
         integ_all: np.ndarray, rec_q: np.ndarray, rec_qd: np.ndarray, rec_qdd: np.ndarray,
         rec_ang: np.ndarray, rec_tau: np.ndarray, rec_fb: np.ndarray, rec_e: np.ndarray,
-        tau_given: np.ndarray) -> None:
+        rec_tau_sum: np.ndarray, tau_given: np.ndarray) -> None:
     """Steps ``first`` … ``end`` (at most ``last[r]`` for run r) of every run: the controller,
     the records and RK4 with τ held over the step; the states ``x_all`` (R, 6 + J) and PI
     integrators ``integ_all`` (R, A) are updated in place. With ``ctrl[4]`` > 0 there is no
     controller: each step holds the torques ``tau_given[step, r]`` (a free-running
-    simulation under given torques, :func:`ropod_sysid.validate.free_run`)."""
+    simulation under given torques, :func:`ropod_sysid.validate.free_run`). ``rec_tau_sum``
+    sums each step's torques into the record nearest it (the steps ``k·stride − stride//2`` …
+    ``k·stride − stride//2 + stride − 1`` into record k): the interval means of
+    :attr:`ropod_sysid.simulate.SimResult.tau_mean`."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
     kp, ki, limit, dt = ctrl[0], ctrl[1], ctrl[2], ctrl[3]
     given = ctrl.shape[0] > 4 and ctrl[4] > 0
@@ -220,6 +223,10 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                 _control(groups, x, sp_all[step, r], qd_set, want, bp, m, b, btau, tauf, ff,
                          arate, crate, integ, tau, kp, ki, limit, dt)
             fb = f_all[step if has_fb else 0, r]
+            near = (step + stride // 2) // stride
+            if near < rec_tau_sum.shape[0]:
+                for a in range(n_act):
+                    rec_tau_sum[near, r, a] += tau[a]
             k1 = ks[0]
             _accel(x, m, b, btau, tauf, ff, tau, fb, has_fb, rhs, k1[3:6])
             k1[0:3] = x[3:6]
@@ -293,7 +300,7 @@ def integrate(groups: tuple[np.ndarray, ...], bp: np.ndarray, ctrl: np.ndarray, 
               bar: Any) -> None:
     """Every run from rest at the unit angles ``angles0`` (R, J) through step ``last[r]``, in
     chunks of :data:`CHUNK` steps (the progress bar moves between them); writes ``records``
-    (q, q̇, q̈, angles, τ, F_b, energy; (n_rec, R, …) each)."""
+    (q, q̇, q̈, angles, τ, F_b, energy, the sums of τ near each record; (n_rec, R, …) each)."""
     n_runs, n_ang = angles0.shape
     x = np.zeros((n_runs, 6 + n_ang))
     x[:, 6:] = angles0

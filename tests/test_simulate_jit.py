@@ -29,7 +29,7 @@ from .conftest import four_variants, smooth_setpoints
 from .test_omni import PLATFORM as OMNI_PLATFORM
 from .test_units_pipeline import OMNI_CONTROL, PAPER_BODY, mixed_platform
 
-FIELDS = ("q", "qd", "qdd", "angles", "tau", "f_b", "energy")
+FIELDS = ("q", "qd", "qdd", "angles", "tau", "f_b", "energy", "tau_mean")
 PUSH = ForceSchedule(np.array([0.0, 0.4, 0.5, 0.9]),
                      np.array([[0.0, 0.0, 0.0], [12.0, -8.0, 2.0], [12.0, -8.0, 2.0],
                                [0.0, 0.0, 0.0]]))
