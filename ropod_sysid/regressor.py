@@ -144,12 +144,19 @@ def usable_pieces(log: Log, span: Span | None = None, row_step: int | None = Non
     return kept
 
 
+SMOOTHERS = {"loess": 2, "quartic": 4}  # --smoother: the local polynomial's degree
+DIFFERENCE_REACH = {2: 2, 4: 4}  # samples each side two differences reach (3- / 5-point)
+
+
 @dataclass
 class Span:
-    """Smoother span: a number of samples, or seconds (``"0.25s"``)."""
+    """Smoother span: a number of samples, or seconds (``"0.25s"``), and the smoother's
+    degree (``--smoother``): 2, MATLAB's LOESS with three-point differences; 4, a local
+    quartic with five-point differences (:func:`smooth`, :func:`difference`)."""
 
     value: float
     seconds: bool
+    degree: int = 2
 
     @classmethod
     def parse(cls, text: Span | str | float | None) -> Span:
@@ -183,6 +190,22 @@ class Span:
             hint = f"did you mean {odd} or {odd + 2}?"
         raise InputError(f"--span {text!r}: a number without 's' is a count of samples and "
                          f"must be an odd whole number ≥ {MIN_SPAN_SAMPLES}; {hint}")
+
+    def with_smoother(self, name: str) -> Span:
+        """This span with the ``--smoother`` ``name`` (``loess`` or ``quartic``)."""
+        if name not in SMOOTHERS:
+            raise InputError(f"--smoother {name!r}: use {' or '.join(SMOOTHERS)}")
+        return Span(self.value, self.seconds, SMOOTHERS[name])
+
+    @property
+    def smoother(self) -> str:
+        """The ``--smoother`` name of the degree."""
+        return next(name for name, d in SMOOTHERS.items() if d == self.degree)
+
+    @property
+    def reach(self) -> int:
+        """Samples each side of a sample that its acceleration's two differences reach."""
+        return DIFFERENCE_REACH[self.degree]
 
     def samples(self, dt: float, n: int) -> int:
         """Odd window length k in samples for sample time ``dt`` and ``n`` samples."""
@@ -326,6 +349,7 @@ class Preprocessed:
     grid: RowGrid = field(default_factory=lambda: RowGrid(1, 3))
     delays: np.ndarray | None = None  # node delays of tau (M, A, n) (DelayBracket), or None
     delay_order: int = 1  # their interpolation order (DelayBracket.order)
+    degree: int = 2  # of the smoother (Span.degree: 2 LOESS, 4 quartic)
 
     def window(self, start: int, stop: int) -> Preprocessed:
         """Samples start:stop (untrimmed indices) as a new block."""
@@ -337,7 +361,7 @@ class Preprocessed:
         return Preprocessed(self.t[i], self.q[i], self.qd[i], self.qdd[i], self.angles[i],
                             self.angle_rates[i], self.tau[i], self.source,
                             self.span_samples, self.dt, self.notes, 0, self.grid, self.delays,
-                            self.delay_order)
+                            self.delay_order, self.degree)
 
     def row_samples(self) -> np.ndarray:
         """Indices of the samples that become equation rows (after trimming)."""
@@ -376,23 +400,38 @@ def tracker_pose(pose: np.ndarray) -> np.ndarray:
     return np.column_stack([pose[:, :2], np.unwrap(pose[:, 2])])
 
 
+def smooth(y: np.ndarray, k: int, degree: int = 2) -> np.ndarray:
+    """The angles' (or a tracker pose's) zero-phase smoother over ``k`` samples: LOESS of
+    ``degree`` 2 (MATLAB's) or 4 (local quartic)."""
+    return signals.loess(y, k, degree=degree)
+
+
+def difference(y: np.ndarray, dt: float, degree: int = 2) -> np.ndarray:
+    """First derivative of smoothed samples: three-point central differences after the
+    quadratic LOESS, five-point after the quartic (each exact for polynomials of the smoother's
+    degree)."""
+    if degree == 2:
+        return signals.central_difference(y, dt)
+    return signals.five_point_difference(y, dt)
+
+
 def derivatives(model: PlatformModel, angles_s: np.ndarray, pose_s: np.ndarray | None,
-                dt: float, odometry_start: OdometryState | None = None,
+                dt: float, odometry_start: OdometryState | None = None, degree: int = 2,
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The recipe's step after smoothing (Sec. VI-B), shared by the in-memory and streamed
     paths: the pose by odometry from the smoothed angles (or the smoothed tracker pose), its
-    central differences, and the angle rates. Returns (q, q̇, q̈, angle rates, unwrapping
-    corrections of the angles); q̈ (N, D) holds the base's and then the units' own coordinates'
-    accelerations (the steered wheels' β̈)."""
+    differences (:func:`difference` for the smoother's ``degree``), and the angle rates.
+    Returns (q, q̇, q̈, angle rates, unwrapping corrections of the angles); q̈ (N, D) holds the
+    base's and then the units' own coordinates' accelerations (the steered wheels' β̈)."""
     if pose_s is None:
         q, corr = odometry_from(model, angles_s, odometry_start)
     else:
         q, corr = pose_s, np.zeros_like(angles_s)
-    qd = signals.central_difference(q, dt)
-    qdd = signals.central_difference(qd, dt)
-    rates = signals.central_difference(angles_s, dt)
+    qd = difference(q, dt, degree)
+    qdd = difference(qd, dt, degree)
+    rates = difference(angles_s, dt, degree)
     if model.n_dof > 3:
-        own = signals.central_difference(rates[:, model.coordinate_channels], dt)
+        own = difference(rates[:, model.coordinate_channels], dt, degree)
         qdd = np.concatenate([qdd, own], axis=1)
     return q, qd, qdd, rates, corr
 
@@ -433,13 +472,14 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     grid = RowGrid.for_span(k, row_step)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
     check_length(log.source, n, k, dt, trim)
-    angles_s = signals.loess(angles, k)
-    pose_s = None if pose is None else signals.loess(tracker_pose(pose), k)
-    q, qd, qdd, rates, _ = derivatives(model, angles_s, pose_s, dt)
+    angles_s = smooth(angles, k, span.degree)
+    pose_s = None if pose is None else smooth(tracker_pose(pose), k, span.degree)
+    q, qd, qdd, rates, _ = derivatives(model, angles_s, pose_s, dt, degree=span.degree)
     tau = delayed(t, platform.torque_constants() * current,
                   nodes if nodes is not None else input_delay)  # type: ignore[arg-type]
     return Preprocessed(t, q, qd, qdd, angles_s, rates, tau, log.source, k, dt, notes, trim,
-                        grid, nodes, input_delay.order(dt) if nodes is not None else 1)  # type: ignore[union-attr]
+                        grid, nodes, input_delay.order(dt) if nodes is not None else 1,  # type: ignore[union-attr]
+                        span.degree)
 
 
 def at_rest(pre: Preprocessed) -> np.ndarray:
