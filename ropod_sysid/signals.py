@@ -105,7 +105,10 @@ def _local_quadratic_rows(u: np.ndarray, w: np.ndarray, degree: int = 2) -> np.n
     least ``degree + 1`` distinct positions with positive weight per row.
     """
     sw = np.sqrt(w)
-    design = sw[..., None] * (u[..., None] ** np.arange(degree + 1))  # (rows, k, degree + 1)
+    powers = [np.ones_like(u), u]
+    while len(powers) <= degree:
+        powers.append(powers[-1] * u)
+    design = sw[..., None] * np.stack(powers, axis=-1)  # (rows, k, degree + 1)
     q, r = np.linalg.qr(design)  # q (rows, k, d + 1), r (rows, d + 1, d + 1)
     e1 = np.zeros(r.shape[:-2] + (degree + 1, 1))
     e1[..., 0, 0] = 1.0
