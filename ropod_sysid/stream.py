@@ -88,6 +88,7 @@ from ropod_sysid.regressor import (
     row_inputs,
     row_system,
     smooth,
+    smoother_note,
 )
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
@@ -394,6 +395,8 @@ class _Run:
         notes = self.notes + self.grid.finish()
         blocks = self.blocks
         tri, obs, n = blocks.finish()
+        note = smoother_note(self.name, blocks.k, blocks.span.degree, blocks.dt)
+        notes += [note] if note else []
         shown = None
         if blocks.gather is not None:
             shown = blocks.gather.result(self.raw, self.t1 - self.t0, bool(self.grid.has_pose),

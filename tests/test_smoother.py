@@ -56,6 +56,20 @@ def test_quartic_streams_like_in_memory(off_square, runs_off_square, step, chunk
     assert np.abs(ga - gp).max() > 1e-6 * np.abs(ga).max()  # a different recipe
 
 
+def test_short_quartic_span_gets_a_note(off_square, runs_off_square):
+    """Below 17 samples the quartic passes 5–8× the LOESS's acceleration noise (on noisy
+    logs the fit broke down there): in memory and streamed, a note says so."""
+    log = runs_off_square[0].log
+    short = Span.parse("13").with_smoother("quartic")
+    note = ("the quartic smoother over 13 samples passes 5–8× the acceleration noise of the "
+            "LOESS; on logs with noisy angles (encoder counts) use --span 0.085s or longer "
+            "(17 samples)")
+    assert any(note in n for n in preprocess(log, off_square, short).notes)
+    assert any(note in n for n in stream.stream_log(log, off_square, short).notes)
+    assert not any("quartic" in n for n in preprocess(log, off_square, QUARTIC).notes)
+    assert not any("quartic" in n for n in preprocess(log, off_square, Span.parse("13")).notes)
+
+
 def test_unknown_smoother_is_one_line_error():
     with pytest.raises(InputError, match="--smoother 'cubic': use loess or quartic"):
         Span.parse(None).with_smoother("cubic")
