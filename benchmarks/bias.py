@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Where the bias of a fit of noise-free logs comes from, and the delay search under noise.
 
-    python benchmarks/bias.py [--part options diagnosis delay]
+    python benchmarks/bias.py [--part options phase diagnosis delay]
 
 The tests' runs (tests/conftest.py): four 8 s variants on the off-square ropod (the pivots
 1–3 cm off the square), simulated at 1 kHz under the simulator's 1 ms zero-order hold and
@@ -10,6 +10,8 @@ over the 29 parameters and the errors of m_b and J_zz,b:
 
 - ``options``: what a user can choose (``--smoother``, ``--control-period``, ``--input-delay
   auto``, ``--row-step``, ``--span``) on the exact logs;
+- ``phase``: the same with the logs' first 0–3 samples dropped (the rows' phase to the
+  simulator's 100 Hz setpoints, whose ripple in the torques rows a step apart can alias);
 - ``diagnosis`` (200 Hz): the regressor formed from the simulation's exact states (q, q̇, q̈,
   the unit angles and their rates) instead of the smoothed ones, one signal at a time, and
   the torques filtered like the angles;
@@ -22,6 +24,7 @@ About 1 minute on a 2-core machine (the first simulation compiles for about 10 s
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -81,6 +84,24 @@ def options(runs: list[SimResult]) -> None:
             fit = fit_logs(logs, PF, FitOptions(**kw))
             found = f" (finds {1000 * fit.input_delay:.2f} ms)" if kw.get("input_delay") else ""
             line(f"{rate:.0f} Hz, {label}{found}", fit.solution.values)
+
+
+def phase(runs: list[SimResult]) -> None:
+    """The same fits with the logs' first samples dropped: the rows' phase to the
+    simulator's 100 Hz setpoints (whose ripple in the speed loops' torques the rows alias)."""
+    print("| log rate, options | largest error, 0 / 1 / 2 / 3 samples dropped |\n|---|---|")
+    for rate in (200.0, 1000.0):
+        logs = [subsampled(PF, r, rate).log for r in runs]
+        for label, kw in [("--control-period 0.001", {"control_period": 0.001}),
+                          ("--smoother quartic --control-period 0.001",
+                           {"control_period": 0.001, "span": QUARTIC})]:
+            out = []
+            for n in range(4):
+                cut = [dataclasses.replace(lg, t=lg.t[n:], angles=lg.angles[n:],
+                                           currents=lg.currents[n:]) for lg in logs]
+                err = fit_logs(cut, PF, FitOptions(**kw)).solution.values / TRUE - 1
+                out.append(f"{100 * np.abs(err).max():.2f} %")
+            print(f"| {rate:.0f} Hz, {label} | {' / '.join(out)} |", flush=True)
 
 
 def five_point(y: np.ndarray, h: float) -> np.ndarray:
@@ -146,12 +167,12 @@ def delay(runs: list[SimResult]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", nargs="+", choices=["options", "diagnosis", "delay"],
-                    default=["options", "diagnosis", "delay"])
+    parts = {"options": options, "phase": phase, "diagnosis": diagnosis, "delay": delay}
+    ap.add_argument("--part", nargs="+", choices=list(parts), default=list(parts))
     args = ap.parse_args()
     runs = simulate(PF, TRUTH, four_variants(8.0), rate=1000.0)
     for part in args.part:
-        {"options": options, "diagnosis": diagnosis, "delay": delay}[part](runs)
+        parts[part](runs)
         print()
 
 

@@ -98,7 +98,7 @@ class SensorNoise:
 
     @property
     def grid(self) -> RowGrid:
-        return RowGrid.for_span(self.k, self.row_step)
+        return RowGrid.for_span(self.k, self.row_step, self.degree)
 
     @property
     def rows_per_second(self) -> float:
@@ -123,9 +123,9 @@ def row_kernel(grid: RowGrid, sample_kernel: np.ndarray) -> np.ndarray:
 
 
 def current_kernel(grid: RowGrid) -> np.ndarray:
-    """Per-sample kernel of a row's torque: the mean over 2⌊step/2⌋ + 1 samples."""
-    n = 2 * (grid.step // 2) + 1
-    return np.full(n, 1.0 / n)
+    """Per-sample kernel of a row's torque: :attr:`RowGrid.torque_kernel` (the mean over
+    2⌊step/2⌋ + 1 samples; after the quartic smoother a quadratic Savitzky–Golay kernel)."""
+    return grid.torque_kernel
 
 
 def difference_kernel(dt: float, degree: int = 2) -> np.ndarray:

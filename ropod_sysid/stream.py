@@ -182,7 +182,7 @@ class _Blocks:
         else:
             check_input_delay(float(self.delay), self.k * dt)  # type: ignore[arg-type]
         self.c = (self.k - 1) // 2
-        self.grid = RowGrid.for_span(self.k, self.row_step)
+        self.grid = RowGrid.for_span(self.k, self.row_step, self.span.degree)
         self.halo = self.grid.halo
         self.trim = self.grid.trim(self.k)
         d = self.grid.step  # blocks start on the row grid
