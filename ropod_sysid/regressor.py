@@ -1,8 +1,9 @@
 """From a log to the identification system A_ID,ext m_ext = b_ID (eqs. 35, 36, 66).
 
 Preprocessing follows Sec. VI-B: encoder angles are smoothed with zero-phase LOESS (MATLAB
-``smooth(…, 'loess')`` semantics), the base pose follows by odometry (or comes from the log's
-tracker columns), velocities and accelerations by central differences; currents times the
+``smooth(…, 'loess')`` semantics; ``--smoother quartic``: a local quartic), the base pose
+follows by odometry (or comes from the log's tracker columns), velocities and accelerations by
+central differences (five-point ones after the quartic); currents times the
 torque constant give the wheel torques. The rows of A_ID,ext and b_ID are then filtered with the
 same LOESS on both sides of the equation, and the ends, where the smoother's window is
 shifted, are trimmed.
