@@ -587,13 +587,13 @@ def row_inputs(pre: Preprocessed, index: np.ndarray, step: int | None = None) ->
     """The row samples ``index`` of a block: their states, and the torques averaged over the
     samples around each: by the row grid's :attr:`RowGrid.torque_kernel`, or with ``step``
     given (the observer's) over an odd boxcar of 2⌊step/2⌋ + 1 samples."""
-    kernel = pre.grid.torque_kernel if step is None else \
-        RowGrid(step, 3).torque_kernel
-    h = (len(kernel) - 1) // 2
+    mean = step is not None or pre.grid.degree == 2
+    h = (pre.grid.step if step is None else step) // 2 if mean else pre.grid.torque_reach
     rows = pre.take(index)
     if h:
         win = np.lib.stride_tricks.sliding_window_view(pre.tau, 2 * h + 1, axis=0)
-        rows.tau = win[index - h] @ kernel
+        rows.tau = win[index - h].mean(axis=-1) if mean else \
+            win[index - h] @ pre.grid.torque_kernel
     return rows
 
 
