@@ -104,8 +104,8 @@ def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
                 weight_rotation: str, physical: bool, input_delay: str, rcond: float,
                 row_step: str = "auto", split_gaps: bool = False,
                 robust: str = "none", control_period: float = 0.0,
-                encoder_counts: int | None = None) -> FitOptions:
-    sp = Span.parse(span)
+                encoder_counts: int | None = None, smoother: str = "loess") -> FitOptions:
+    sp = Span.parse(span).with_smoother(smoother)
     return FitOptions(friction=friction,  # type: ignore[arg-type]
                       span=sp, fix=parse_fix(fix),
                       weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
@@ -151,6 +151,12 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                    "the units carrying none).")
 @click.option("--span", type=SpanType(), default=None,
               help="LOESS span: an odd number of samples (21) or seconds (0.1s). Default 0.1s.")
+@click.option("--smoother", type=click.Choice(["loess", "quartic"]), default="loess",
+              show_default=True,
+              help="How the angles are smoothed and differentiated: loess (MATLAB's local "
+                   "quadratic, three-point differences) or quartic (a local quartic, five-point "
+                   "differences: less discretisation bias on clean, fast logs, about 1.6× the "
+                   "σ on noisy ones at the same span).")
 @click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
               help="Form an equation row every N samples (at most one span); auto: about ten "
                    "per span (every 10th sample at 1 kHz with 0.1s, every sample at 100 Hz). "
@@ -201,7 +207,8 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                 "validate_logs": "--validate"})
 def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, node_name: str,
             friction: str,
-            span: Span | None, row_step: str, fix: tuple[str, ...], weight_rotation: str,
+            span: Span | None, smoother: str, row_step: str, fix: tuple[str, ...],
+            weight_rotation: str,
             physical: bool, robust: str,
             input_delay: str, control_period: float, encoder_counts: int | None,
             rcond: float, report_path: str | None,
@@ -214,7 +221,8 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
     --workers or --dask the logs are reduced in parallel on Dask workers.
     """
     options = fit_options(friction, span, fix, weight_rotation, physical, input_delay, rcond,
-                          row_step, split_gaps, robust, control_period, encoder_counts)
+                          row_step, split_gaps, robust, control_period, encoder_counts,
+                          smoother)
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", node_name):
         raise InputError(f"--node-name {node_name!r}: a ROS 2 node name has letters, digits and "
                          "underscores and does not start with a digit, e.g. ropod_dynamic_model")

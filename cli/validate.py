@@ -50,7 +50,7 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, span: S
     _, values = parameters_of(pfile, platform, params_path)
     params = DynamicParameters.from_mapping(values, platform, params_path)
     file_span, delay, row_step = fit_settings(pfile, params_path)  # as the fit was made
-    sp = span if span is not None else file_span
+    sp = span.with_smoother(file_span.smoother) if span is not None else file_span
     results = validate_sources(list(logs), platform, params, sp, delay, workers=workers,
                                dask_address=dask_address, row_step=row_step, quiet=quiet,
                                split_gaps=split_gaps)

@@ -192,6 +192,9 @@ class FitResult:
         if o.control_period:
             parts.append(f"The drives hold each torque {1000 * o.control_period:g} ms: half of "
                          "it is in the input delay (--control-period)")
+        if o.span.degree != 2:
+            parts.append("Angles smoothed by a local quartic, five-point differences "
+                         "(--smoother quartic)")
         return "; ".join(parts)
 
     def robust_text(self) -> str:
@@ -231,6 +234,8 @@ class FitResult:
         extras: dict[str, object] = {
             "friction": self.options.friction,
             "span": str(self.options.span),
+            **({"smoother": self.options.span.smoother} if self.options.span.degree != 2
+               else {}),
             "row_step": self.options.row_step or "auto",
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
@@ -281,13 +286,17 @@ MODEL_CONVENTIONS = (
 
 def _span_of(pfile: ParameterFile, where: str) -> Span:
     text = pfile.extras.get("span")
-    if text is None:
-        return Span.parse(None)
+    smoother = pfile.extras.get("smoother", "loess")
     try:
-        return Span.parse(str(text).replace(" samples", "").strip())
+        span = Span.parse(None if text is None else str(text).replace(" samples", "").strip())
     except InputError:
         raise InputError(f"{where}: key 'span' is {text!r}; expected e.g. '0.1s' or "
                          "'21 samples', or give --span") from None
+    try:
+        return span.with_smoother(str(smoother))
+    except InputError:
+        raise InputError(f"{where}: key 'smoother' is {smoother!r}; expected 'loess' or "
+                         "'quartic'") from None
 
 
 def _row_step_of(pfile: ParameterFile, where: str) -> int | None:
@@ -565,7 +574,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
             enc = platform.layout.encoders
             note = counts_note(log.source, detect_encoder_counts(
                 log.angles[:, enc], np.asarray(platform.layout.wrapped)[enc]),
-                options.encoder_counts)
+                options.encoder_counts, isinstance(delay, DelayBracket))
             out.append((log.source, triangles(model, pre, options.friction,
                                               encoder_counts=options.encoder_counts),
                         pre.notes + ([note] if note else []), None))

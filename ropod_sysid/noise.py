@@ -59,6 +59,8 @@ class SensorNoise:
     log_rate : sample rate of the logs [Hz]
     span : the fit's LOESS span [s] (``--span``; 0.1 s by default)
     row_step : samples between equation rows (``--row-step``; None: the fit's default)
+    degree : the fit's smoother (``--smoother``): 2 LOESS and three-point differences, 4 the
+        local quartic and five-point differences
     """
 
     current_noise: float = 0.03
@@ -66,6 +68,7 @@ class SensorNoise:
     log_rate: float = 100.0
     span: float = DEFAULT_SPAN_S
     row_step: int | None = None
+    degree: int = 2
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.current_noise) and self.current_noise >= 0):
@@ -95,7 +98,7 @@ class SensorNoise:
 
     @property
     def grid(self) -> RowGrid:
-        return RowGrid.for_span(self.k, self.row_step)
+        return RowGrid.for_span(self.k, self.row_step, self.degree)
 
     @property
     def rows_per_second(self) -> float:
@@ -120,16 +123,24 @@ def row_kernel(grid: RowGrid, sample_kernel: np.ndarray) -> np.ndarray:
 
 
 def current_kernel(grid: RowGrid) -> np.ndarray:
-    """Per-sample kernel of a row's torque: the mean over 2⌊step/2⌋ + 1 samples."""
-    n = 2 * (grid.step // 2) + 1
-    return np.full(n, 1.0 / n)
+    """Per-sample kernel of a row's torque: :attr:`RowGrid.torque_kernel` (the mean over
+    2⌊step/2⌋ + 1 samples; after the quartic smoother a quadratic Savitzky–Golay kernel)."""
+    return grid.torque_kernel
 
 
-def acceleration_kernel(k: int, dt: float) -> np.ndarray:
+def difference_kernel(dt: float, degree: int = 2) -> np.ndarray:
+    """Convolution kernel [1/s] of the first differences after the smoother of ``degree``:
+    three-point central (2), five-point (4) (:func:`ropod_sysid.regressor.difference`)."""
+    if degree == 2:
+        return np.array([0.5, 0.0, -0.5]) / dt
+    return np.array([-1.0, 8.0, 0.0, -8.0, 1.0]) / (12.0 * dt)
+
+
+def acceleration_kernel(k: int, dt: float, degree: int = 2) -> np.ndarray:
     """Per-sample kernel from an angle's error to its contribution to q̈ [1/s²]: the LOESS of
-    ``k`` samples and two central differences."""
-    cd = np.array([0.5, 0.0, -0.5]) / dt
-    return np.convolve(np.convolve(signals.loess_kernel(k), cd), cd)
+    ``k`` samples (of ``degree``) and two differences."""
+    cd = difference_kernel(dt, degree)
+    return np.convolve(np.convolve(signals.loess_kernel(k, degree), cd), cd)
 
 
 def encoder_variance(counts: int) -> float:
@@ -150,11 +161,11 @@ def odometry_gain(model: object, angles: np.ndarray) -> np.ndarray:
     return np.linalg.solve(ata, np.einsum("nri,nrj->nij", a, d))
 
 
-def velocity_kernel(k: int, dt: float) -> np.ndarray:
+def velocity_kernel(k: int, dt: float, degree: int = 2) -> np.ndarray:
     """Per-sample kernel from an angle's error to its contribution to q̇ [1/s]: the LOESS of
-    ``k`` samples and one central difference. (It is odd where :func:`acceleration_kernel` is
-    even: the errors of q̇ and q̈ of a row are uncorrelated.)"""
-    return np.convolve(signals.loess_kernel(k), np.array([0.5, 0.0, -0.5]) / dt)
+    ``k`` samples (of ``degree``) and one difference. (It is odd where
+    :func:`acceleration_kernel` is even: the errors of q̇ and q̈ of a row are uncorrelated.)"""
+    return np.convolve(signals.loess_kernel(k, degree), difference_kernel(dt, degree))
 
 
 def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np.ndarray:
@@ -166,7 +177,8 @@ def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np
     n_dof = int(getattr(model, "n_dof", 3))
     if noise.encoder_counts is None:
         return np.zeros((th.size, n_dof, n_dof))
-    power = float(np.sum(row_kernel(noise.grid, acceleration_kernel(noise.k, noise.dt)) ** 2))
+    kernel = acceleration_kernel(noise.k, noise.dt, noise.degree)
+    power = float(np.sum(row_kernel(noise.grid, kernel) ** 2))
     g = odometry_gain(model, st.angles)  # type: ignore[attr-defined]  # (N, 3, J)
     c, s = np.cos(th), np.sin(th)
     rot = np.zeros((th.size, 3, 3))
@@ -212,7 +224,8 @@ def regressor_error_gram(model: object, st: object, noise: SensorNoise,
         h = 1e-4
         rates = st.angle_rate  # type: ignore[attr-defined]
         base = model.a_id_ext(model.state(st.q, st.qd, st.angles, rates), qdd, friction)  # type: ignore[attr-defined]
-        power = float(np.sum(row_kernel(noise.grid, velocity_kernel(noise.k, noise.dt)) ** 2))
+        kernel = velocity_kernel(noise.k, noise.dt, noise.degree)
+        power = float(np.sum(row_kernel(noise.grid, kernel) ** 2))
         var = encoder_variance(int(noise.encoder_counts)) * power * np.minimum(
             np.abs(rates) * noise.dt / (2.0 * math.pi / int(noise.encoder_counts)), 1.0)
         encoders = _encoders(model, rates.shape[1])
@@ -367,7 +380,7 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     rows = row_inputs(pre, index)  # type: ignore[arg-type]
     st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
-                        row_step=pre.grid.step)  # type: ignore[attr-defined]
+                        row_step=pre.grid.step, degree=pre.degree)  # type: ignore[attr-defined]
     per_dof = regressor_error_gram(model, st, noise, friction, qdd=rows.qdd)
     return kind_grams(per_dof)
 
@@ -423,14 +436,19 @@ def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None)
     return None
 
 
-def counts_note(source: str, detected: int | None, given: int | None) -> str | None:
+def counts_note(source: str, detected: int | None, given: int | None,
+                delay_search: bool = False) -> str | None:
     """The note on a log whose angles move by whole counts of its encoders
-    (:func:`detect_encoder_counts`) when the fit was not told them, or was told others."""
+    (:func:`detect_encoder_counts`) when the fit was not told them, or was told others.
+    ``delay_search``: the fit searches the input delay (``--input-delay auto``), whose
+    criterion the same errors bias (docs/method.md)."""
     if detected is None or detected == given:
         return None
     if given is None:
+        delay = ("; and they move the delay --input-delay auto finds later (the residual of "
+                 "the uncorrected fit is least there)") if delay_search else ""
         return (f"{source}: the angles move by whole counts of 2π/{detected}; give "
                 f"--encoder-counts {detected} to correct the fit for the encoders' "
-                "quantisation (its errors in the accelerations shrink the values)")
+                f"quantisation (its errors in the accelerations shrink the values{delay})")
     return (f"{source}: the angles move by whole counts of 2π/{detected}, not of the "
             f"--encoder-counts {given} given; check the encoders' resolution")

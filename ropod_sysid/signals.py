@@ -22,6 +22,7 @@ from scipy import ndimage
 
 __all__ = [
     "central_difference",
+    "five_point_difference",
     "is_uniform",
     "loess",
     "loess_bruteforce",
@@ -95,17 +96,21 @@ def loess_span_samples(span: float, n: int, *, make_odd: bool = True) -> int:
     return max(k, 1)
 
 
-def _local_quadratic_rows(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Rows ``r`` with ``r @ y`` = constant term of the ``w``-weighted quadratic fit of y on u.
+def _local_quadratic_rows(u: np.ndarray, w: np.ndarray, degree: int = 2) -> np.ndarray:
+    """Rows ``r`` with ``r @ y`` = constant term of the ``w``-weighted polynomial fit of y on u
+    (a quadratic, or the ``degree`` given: 4 for the quartic smoother).
 
     ``u`` and ``w`` have shape ``(rows, k)``; the fit is solved by a batched QR of
-    ``sqrt(w) * [1, u, u^2]`` (better conditioned than normal equations). Needs at least three
-    distinct positions with positive weight per row.
+    ``sqrt(w) * [1, u, …, u^degree]`` (better conditioned than normal equations). Needs at
+    least ``degree + 1`` distinct positions with positive weight per row.
     """
     sw = np.sqrt(w)
-    design = sw[..., None] * np.stack([np.ones_like(u), u, u * u], axis=-1)  # (rows, k, 3)
-    q, r = np.linalg.qr(design)  # q (rows, k, 3), r (rows, 3, 3)
-    e1 = np.zeros(r.shape[:-2] + (3, 1))
+    powers = [np.ones_like(u), u]
+    while len(powers) <= degree:
+        powers.append(powers[-1] * u)
+    design = sw[..., None] * np.stack(powers, axis=-1)  # (rows, k, degree + 1)
+    q, r = np.linalg.qr(design)  # q (rows, k, d + 1), r (rows, d + 1, d + 1)
+    e1 = np.zeros(r.shape[:-2] + (degree + 1, 1))
     e1[..., 0, 0] = 1.0
     v = np.linalg.solve(np.swapaxes(r, -1, -2), e1)  # R^T v = e1  ->  v = R^-T e1
     return (q @ v)[..., 0] * sw
@@ -132,23 +137,26 @@ def _end_geometry(k: int, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, _tricube(u)
 
 
-def loess_kernel(k: int) -> np.ndarray:
+def loess_kernel(k: int, degree: int = 2) -> np.ndarray:
     """Interior LOESS weights for uniform sampling: output ``= sum(kernel * window)``.
 
-    Constant term of the tricube-weighted local quadratic fit over a centred window of ``k``
-    samples; the two outermost samples have weight zero.
+    Constant term of the tricube-weighted local quadratic (``degree`` 4: quartic) fit over a
+    centred window of ``k`` samples; the two outermost samples have weight zero.
 
     Parameters
     ----------
     k : int
         Window length in samples, odd and positive.
+    degree : int, optional
+        2 (MATLAB's LOESS, the default) or 4 (local quartic: reproduces quintics, so its
+        bias is O(h⁶) against O(h⁴), at more noise for the same window).
 
     Returns
     -------
     kernel : ndarray, shape (k,)
-        Symmetric weights (dimensionless) summing to 1. For ``k <= 3`` the identity
-        ``[0, 1, 0]`` (or ``[1]``); for ``k = 5`` ``[0, 0, 1, 0, 0]`` since only three samples
-        carry weight.
+        Symmetric weights (dimensionless) summing to 1. For ``k <= degree + 3`` the identity
+        (e.g. ``[0, 0, 1, 0, 0]`` for ``k = 5``, degree 2): only ``degree + 1`` samples carry
+        weight.
 
     Examples
     --------
@@ -156,16 +164,16 @@ def loess_kernel(k: int) -> np.ndarray:
     [0.0, -0.077344, 0.309376, 0.535936, 0.309376, -0.077344, 0.0]
     """
     k = _check_odd_k(k)
-    if k <= 3:
+    if k <= degree + 1:
         kernel = np.zeros(k)
         kernel[k // 2] = 1.0
         return kernel
     u, w = _interior_geometry(k)
-    kernel = _local_quadratic_rows(u[None, :], w[None, :])[0]
+    kernel = _local_quadratic_rows(u[None, :], w[None, :], degree)[0]
     return 0.5 * (kernel + kernel[::-1])
 
 
-def loess_end_weights(k: int) -> np.ndarray:
+def loess_end_weights(k: int, degree: int = 2) -> np.ndarray:
     """LOESS weights for the first ``(k-1)/2`` outputs of a uniformly sampled signal.
 
     Row ``i`` gives output ``i`` as ``weights[i] @ y[:k]`` (the window does not shrink at the
@@ -180,17 +188,18 @@ def loess_end_weights(k: int) -> np.ndarray:
     Returns
     -------
     weights : ndarray, shape ((k-1)/2, k)
-        Dimensionless; each row sums to 1 and reproduces quadratics exactly. For ``k = 3`` the
-        single row is ``[1, 0, 0]``. The cost is O(k^2), so very long windows are expensive.
+        Dimensionless; each row sums to 1 and reproduces polynomials of ``degree`` (2, or 4)
+        exactly. For ``k <= degree + 1`` the rows select their own sample. The cost is
+        O(k^2), so very long windows are expensive.
     """
     k = _check_odd_k(k)
     c = (k - 1) // 2
-    if k <= 3:
+    if k <= degree + 1:
         weights = np.zeros((c, k))
         weights[np.arange(c), np.arange(c)] = 1.0
         return weights
     u, w = _end_geometry(k, np.arange(c))
-    return _local_quadratic_rows(u, w)
+    return _local_quadratic_rows(u, w, degree)
 
 
 def _check_odd_k(k: int) -> int:
@@ -251,7 +260,7 @@ def _overlap_save(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return valid.transpose(0, 2, 1).reshape(-1, m)[:out_len]
 
 
-def _apply_ends(y2: np.ndarray, out: np.ndarray, k: int) -> None:
+def _apply_ends(y2: np.ndarray, out: np.ndarray, k: int, degree: int = 2) -> None:
     """Write the first and last ``(k-1)/2`` outputs of a uniform LOESS into ``out``."""
     c = (k - 1) // 2
     head = y2[:k]
@@ -261,12 +270,12 @@ def _apply_ends(y2: np.ndarray, out: np.ndarray, k: int) -> None:
     for start in range(0, c, block):
         rows = np.arange(start, min(c, start + block))
         u, w = _end_geometry(k, rows)
-        weights = _local_quadratic_rows(u, w)
+        weights = _local_quadratic_rows(u, w, degree)
         out[rows] = weights @ head
         out[out.shape[0] - 1 - rows] = weights @ tail
 
 
-def loess(y: np.ndarray, span: float, axis: int = 0) -> np.ndarray:
+def loess(y: np.ndarray, span: float, axis: int = 0, degree: int = 2) -> np.ndarray:
     """LOESS smoothing of uniformly sampled data (MATLAB ``smooth(y, span, 'loess')``).
 
     Local quadratic fit with tricube weights over windows of ``k`` samples; near the ends the
@@ -284,12 +293,16 @@ def loess(y: np.ndarray, span: float, axis: int = 0) -> np.ndarray:
         :func:`loess_span_samples`.
     axis : int, optional
         Axis along which to smooth. Default 0.
+    degree : int, optional
+        Of the local polynomial: 2 (MATLAB's LOESS, the default) or 4 (the quartic smoother,
+        :func:`loess_kernel`).
 
     Returns
     -------
     ndarray
-        Smoothed samples, same shape and unit as ``y`` (float64). ``k <= 3`` returns a copy of
-        ``y`` (a three-sample window only weights its centre). A non-finite sample spoils the
+        Smoothed samples, same shape and unit as ``y`` (float64). ``k <= degree + 1`` returns
+        a copy of ``y`` (a window of ``degree + 3`` samples only weights its centre in the
+        interior). A non-finite sample spoils the
         outputs whose window contains it.
 
     See Also
@@ -300,12 +313,12 @@ def loess(y: np.ndarray, span: float, axis: int = 0) -> np.ndarray:
     y2, moved_shape = _as_2d(y, axis)
     n = y2.shape[0]
     k = loess_span_samples(span, n) if n else 0
-    if k <= 3:
+    if k <= degree + 1:
         return _from_2d(y2.copy(), moved_shape, axis)
     c = (k - 1) // 2
     out = np.empty_like(y2)
-    out[c : n - c] = _interior(y2, loess_kernel(k))
-    _apply_ends(y2, out, k)
+    out[c : n - c] = _interior(y2, loess_kernel(k, degree))
+    _apply_ends(y2, out, k, degree)
     return _from_2d(out, moved_shape, axis)
 
 
@@ -543,6 +556,21 @@ def central_difference(y: np.ndarray, t: np.ndarray | float) -> np.ndarray:
         if not np.all(np.diff(spacing) > 0):
             raise ValueError("t must be strictly increasing")
     return np.gradient(y, spacing, axis=0, edge_order=2 if n >= 3 else 1)
+
+
+def five_point_difference(y: np.ndarray, dt: float) -> np.ndarray:
+    """First derivative along axis 0 of uniformly sampled ``y`` (N, …), exact for quartics.
+
+    Interior: ``(y[i-2] - 8 y[i-1] + 8 y[i+1] - y[i+2]) / (12 dt)`` (its error is
+    −dt⁴ y⁽⁵⁾/30, against dt² y⁽³⁾/6 for the three-point difference); the two samples at each
+    end: :func:`central_difference`. Used after the quartic smoother, whose own error is of
+    higher order than three-point differences'.
+    """
+    y = np.asarray(y, dtype=float)
+    out = central_difference(y, dt)
+    if y.shape[0] >= 5:
+        out[2:-2] = (y[:-4] - 8.0 * y[1:-3] + 8.0 * y[3:-1] - y[4:]) / (12.0 * dt)
+    return out
 
 
 def is_uniform(t: np.ndarray, rtol: float = 1e-6) -> bool:

@@ -13,7 +13,8 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
    path. A step off the grid found after the head restarts the pass in resampling mode;
 3. per block of kept samples [s, e): LOESS of the angles over the block with a halo of
    (k−1)/2 + 2 + h samples (the smoother's half-window for the angles, two samples for the two
-   central differences, the rows' halo h = :attr:`ropod_sysid.regressor.RowGrid.halo`),
+   central differences — four for the quartic smoother's five-point ones, ``Span.reach`` —
+   the rows' halo h = :attr:`ropod_sysid.regressor.RowGrid.halo`),
    odometry continued from the pose carried from the previous block, central differences,
    the rows of A_ID,ext and b_ID on the row grid (:class:`ropod_sysid.regressor.RowGrid`)
    and their LOESS, and the QR triangles of the block's rows merged into the log's (TSQR),
@@ -51,7 +52,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ropod_sysid import signals
 from ropod_sysid.chunks import (
     DEFAULT_CHUNK,
     Source,
@@ -87,6 +87,8 @@ from ropod_sysid.regressor import (
     no_piece_left,
     row_inputs,
     row_system,
+    smooth,
+    smoother_note,
 )
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
@@ -149,6 +151,7 @@ class _Blocks:
         self.model = PlatformModel(platform)
         self.k_t = platform.torque_constants()
         self.span = span
+        self.reach = span.reach  # samples each side the two differences reach
         self.bracket = input_delay if isinstance(input_delay, DelayBracket) else None
         self.delay: float | np.ndarray = 0.0 if self.bracket else float(input_delay)  # type: ignore[arg-type]
         self.friction = friction
@@ -179,7 +182,7 @@ class _Blocks:
         else:
             check_input_delay(float(self.delay), self.k * dt)  # type: ignore[arg-type]
         self.c = (self.k - 1) // 2
-        self.grid = RowGrid.for_span(self.k, self.row_step)
+        self.grid = RowGrid.for_span(self.k, self.row_step, self.span.degree)
         self.halo = self.grid.halo
         self.trim = self.grid.trim(self.k)
         d = self.grid.step  # blocks start on the row grid
@@ -245,13 +248,13 @@ class _Blocks:
                 last = e == end
             else:
                 e = s + self.block
-                if e + self.halo + 2 + max(c, self.lookahead) > self.avail:
+                if e + self.halo + self.reach + max(c, self.lookahead) > self.avail:
                     return
                 last = False
             self._reduce(s, e, last, n)
             self.s = e
             # keep what the next block reaches back to
-            keep = max(0, min(e - self.halo - 2 - c, e - self.halo - self.lookback))
+            keep = max(0, min(e - self.halo - self.reach - c, e - self.halo - self.lookback))
             self._drop_before(keep)
 
     def _window(self, r0: int, r1: int) -> _Samples:
@@ -271,19 +274,20 @@ class _Blocks:
         """Reduce kept samples [s, e) to triangles (and observer figures)."""
         c, k, dt, halo = self.c, self.k, self.dt, self.halo
         first = s == self.trim
-        qa = 0 if first else s - halo - 2  # first sample of the pose
+        reach, degree = self.reach, self.span.degree  # the differences' samples each side
+        qa = 0 if first else s - halo - reach  # first sample of the pose
         r0 = max(0, min(qa - c, s - halo - self.lookback))  # first raw sample
-        r1 = n if last else e + halo + 2 + max(c, self.lookahead)
+        r1 = n if last else e + halo + reach + max(c, self.lookahead)
         assert r1 is not None
         w = self._window(r0, r1)
-        q1 = r1 if last else e + halo + 2
+        q1 = r1 if last else e + halo + reach
         i0, i1 = qa - r0, q1 - r0
-        angles = signals.loess(w.angles, k)[i0:i1]
-        pose = None if w.pose is None else signals.loess(w.pose, k)[i0:i1]
+        angles = smooth(w.angles, k, degree)[i0:i1]
+        pose = None if w.pose is None else smooth(w.pose, k, degree)[i0:i1]
         q, qd, qdd, rates, corr = derivatives(self.model, angles, pose, dt,
-                                              None if first else self.odo)
+                                              None if first else self.odo, degree)
         if w.pose is None and not last:
-            j = (e - halo - 2) - qa  # the next block's first pose sample
+            j = (e - halo - reach) - qa  # the next block's first pose sample
             self.odo = OdometryState(q[j].copy(), corr[j].copy())
         tau = delayed(w.t, self.k_t * w.currents, self.delay)
         # samples [pa, pb) are preprocessed: the rows need [s - halo, e + halo); the
@@ -300,7 +304,7 @@ class _Blocks:
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], angles[jq], rates[jq], tau[jr],
-                           self.source, k, dt, [], 0, self.grid)
+                           self.source, k, dt, [], 0, self.grid, degree=degree)
         self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)), pa, oa, ob,
                      last)
 
@@ -379,7 +383,7 @@ class _Run:
             enc = log.layout.encoders
             note = counts_note(self.name, detect_encoder_counts(
                 log.angles[:, enc], np.asarray(log.layout.wrapped)[enc]),
-                self.blocks.encoder_counts)
+                self.blocks.encoder_counts, self.blocks.bracket is not None)
             if note is not None:
                 self.notes.append(note)
         self.raw += log.n_samples
@@ -391,6 +395,8 @@ class _Run:
         notes = self.notes + self.grid.finish()
         blocks = self.blocks
         tri, obs, n = blocks.finish()
+        note = smoother_note(self.name, blocks.k, blocks.span.degree, blocks.dt)
+        notes += [note] if note else []
         shown = None
         if blocks.gather is not None:
             shown = blocks.gather.result(self.raw, self.t1 - self.t0, bool(self.grid.has_pose),

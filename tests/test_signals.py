@@ -7,6 +7,7 @@ import pytest
 
 from ropod_sysid.signals import (
     central_difference,
+    five_point_difference,
     is_uniform,
     loess,
     loess_bruteforce,
@@ -84,6 +85,48 @@ def test_kernel_small_k() -> None:
     np.testing.assert_allclose(loess_kernel(5), [0, 0, 1, 0, 0], atol=1e-14)
     with pytest.raises(ValueError):
         loess_kernel(4)
+
+
+@pytest.mark.parametrize("k", [9, 21, 101])
+def test_quartic_kernel_reproduces_quintics_and_its_ends_quartics(k: int) -> None:
+    """The quartic smoother (``--smoother quartic``): symmetric, so the interior reproduces
+    quintics (the quadratic LOESS only cubics); the shifted end windows reproduce quartics."""
+    kernel, ends = loess_kernel(k, 4), loess_end_weights(k, 4)
+    c = (k - 1) // 2
+    j = np.arange(k)
+    for p in range(6):
+        np.testing.assert_allclose(kernel @ ((j - c) / c) ** p, 1.0 if p == 0 else 0.0,
+                                   atol=1e-10)
+    for p in range(5):
+        np.testing.assert_allclose(ends @ (j / k) ** p, (np.arange(c) / k) ** p, atol=1e-9)
+    # the quadratic LOESS is off for a quartic (its fourth moment)
+    assert abs(loess_kernel(k) @ ((j - c) / c) ** 4) > 1e-3
+    x = np.arange(300.0) / 300
+    y = np.column_stack([x**5, np.sin(9 * x)])
+    out = loess(y, k, degree=4)
+    np.testing.assert_allclose(out[c:-c, 0], y[c:-c, 0], atol=1e-12)
+    assert np.abs(out - y)[c:-c, 1].max() < 0.2 * np.abs(loess(y, k) - y)[c:-c, 1].max()
+
+
+def test_quartic_small_windows_return_the_samples() -> None:
+    y = np.random.default_rng(2).standard_normal((30, 2))
+    np.testing.assert_array_equal(loess(y, 5, degree=4), y)
+    out = loess(y, 7, degree=4)  # five samples with weight: the interior is the sample
+    np.testing.assert_allclose(out[3:-3], y[3:-3], atol=1e-12)
+    np.testing.assert_allclose(loess_kernel(7, 4), [0, 0, 0, 1, 0, 0, 0], atol=1e-14)
+
+
+def test_five_point_difference_is_exact_for_quartics() -> None:
+    dt = 0.01
+    t = np.arange(40) * dt
+    y = np.column_stack([1 + t - 3 * t**2 + 2 * t**3 - 5 * t**4, np.sin(7 * t)])
+    d = five_point_difference(y, dt)
+    np.testing.assert_allclose(d[2:-2, 0], (1 - 6 * t + 6 * t**2 - 20 * t**3)[2:-2],
+                               rtol=0, atol=1e-10)
+    np.testing.assert_allclose(d[:2], central_difference(y, dt)[:2], atol=0)
+    err5 = np.abs(d[2:-2, 1] - 7 * np.cos(7 * t[2:-2])).max()
+    err3 = np.abs(central_difference(y, dt)[2:-2, 1] - 7 * np.cos(7 * t[2:-2])).max()
+    assert err5 < 0.01 * err3
 
 
 # ------------------------------------------------------------------ loess semantics

@@ -117,7 +117,8 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     friction, values = parameters_of(pfile, platform, where)
     names = parameter_names(platform, friction)
     file_span, delay, row_step = fit_settings(pfile, where)
-    span = span if span is not None else file_span
+    # a --span given keeps the file's smoother
+    span = span.with_smoother(file_span.smoother) if span is not None else file_span
     fixed = {k: values[k] for k in names
              if k in values and pfile.parameters[k].get("fixed") is True}
     extra_fixed = pfile.extras.get("fixed")
