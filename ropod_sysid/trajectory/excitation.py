@@ -48,6 +48,7 @@ SPEED_WEIGHT = 0.5  # optimize(): weight of −log(mean speed / v_max) in the ob
 SINGULAR_WEIGHT = 1.0  # optimize(): weight of the fraction of samples near singular
 MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
 SIGMA_RERANK = 6  # optimize("sigma"): candidates within the limits weighed by check at the end
+CURVATURE_MARGIN = 0.95  # optimize(): the least curvature radius is planned at R_min / this
 OBJECTIVES = ("sigma", "cond", "logdet")  # optimize(): what it minimises (the first: default)
 
 
@@ -99,9 +100,7 @@ class _Objective:
         self.friction = friction
         n = int(math.ceil(duration * grid_rate))
         self.t = np.linspace(0.0, duration, n + 1)
-        r_max = float(np.linalg.norm(self.positions, axis=1).max())
-        self.family = FourierFamily(duration, harmonics, self.t, r_max,
-                                    limits.pivot_rate_max or 1.5)
+        self.family = _family(platform, duration, harmonics, self.t, limits)
         step = max(int(round(grid_rate / eval_rate)), 1)
         self.eval_idx = np.arange(step // 2 + 1, n, step)  # interior samples (not at rest)
         self.rank: int | None = None
@@ -374,9 +373,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
             polish=False, vectorized=True, updating="deferred", init="latinhypercube",
             callback=callback)
     fine_t = np.linspace(0.0, duration, int(round(duration / dt)) + 1)
-    fam = FourierFamily(duration, harmonics, fine_t,
-                        float(np.linalg.norm(platform.positions, axis=1).max()),
-                        limits.pivot_rate_max or 1.5)
+    fam = _family(platform, duration, harmonics, fine_t, limits)
     notes: list[str] = []
     why_first = ""
     good: list[tuple[np.ndarray, Trajectory, float, float]] = []
@@ -447,10 +444,23 @@ def _total_error(traj: Trajectory, platform: Platform, limits: Limits, floor: Fl
     return float(np.mean(np.log(total[ok] / sigma.scale[idx][ok]))) if ok.any() else math.inf
 
 
+def _family(platform: Platform, duration: float, harmonics: int, t: np.ndarray,
+            limits: Limits) -> FourierFamily:
+    """The search's :class:`FourierFamily` on the grid t: curvature below the units' and
+    1 / (R_min / :data:`CURVATURE_MARGIN`) (002 eq. 26)."""
+    r_min = limits.curvature_radius_min
+    return FourierFamily(duration, harmonics, t,
+                         float(np.linalg.norm(platform.positions, axis=1).max()),
+                         limits.pivot_rate_max or 1.5,
+                         radius_min=None if r_min is None else r_min / CURVATURE_MARGIN)
+
+
 def _verify(traj: Trajectory, platform: Platform, limits: Limits,
             floor: Floor) -> tuple[bool, str]:
-    """Limits, floor (four variants) and the integrated turning rates, flags and wheel rates
-    of a run on its own grid."""
+    """Limits, floor (four variants), the curvature radius (002 eq. 26) and the integrated
+    turning rates, flags and wheel rates of a run on its own grid."""
+    from ropod_sysid.trajectory.precheck import curvature_report
+
     rates = traj.twist_rates()
     if traj.speed().max() > limits.v_max:
         return False, "speed"
@@ -458,6 +468,11 @@ def _verify(traj: Trajectory, platform: Platform, limits: Limits,
         return False, "acceleration"
     if np.abs(traj.omega).max() > limits.w_max or np.abs(rates[:, 2]).max() > limits.alpha_max:
         return False, "rotation"
+    if limits.curvature_radius_min is not None:
+        curve = curvature_report(traj.t, traj.twist(), platform.positions,
+                                 limits.curvature_radius_min)
+        if not curve.ok:
+            return False, f"curvature radius {curve.min_radius:.3g} m"
     var = variants(traj)
     off = _off_floor(var, floor)
     if off is not None:

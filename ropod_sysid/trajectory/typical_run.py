@@ -33,6 +33,7 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
+from ropod_sysid.trajectory.precheck import curvature_report
 from ropod_sysid.trajectory.prediction import predict_angles, steering_points, trailing_points
 from ropod_sysid.trajectory.run_variants import _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
@@ -281,7 +282,8 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             dt: float = 0.005, seed: int = 0, pivot_rate_max: float | None = 1.5,
             platform: Platform | None = None,
             wheel_rate_max: float | None = None,
-            steer_rate_max: float | None = STEER_RATE_MAX) -> Trajectory:
+            steer_rate_max: float | None = STEER_RATE_MAX,
+            curvature_radius_min: float | None = None) -> Trajectory:
     """A "typical" identification run (thesis Sec. VI-A), from rest to rest.
 
     The run is a chain of loops ("lobes") through the start, each leaving and reaching it along
@@ -348,6 +350,11 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     steer_rate_max : steering-rate limit of units with an actuated steering [rad/s] (default
         :data:`~ropod_sysid.trajectory.limits.STEER_RATE_MAX`, 001's 195.95 °/s); None to
         not plan for it
+    curvature_radius_min : least curvature radius R = |v|/|ω| of the base wherever it rotates
+        [m] (002 eq. 26; :func:`~ropod_sysid.trajectory.limits.default_curvature_radius`
+        gives a platform's default); None (default): no limit. With it the start's whole
+        rotation is a circle about a point at least R_min / 0.9 beside the base origin (no
+        rotation in place, R = 0) and every corner is at least that wide.
 
     Returns
     -------
@@ -355,7 +362,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         Setpoints at ``dt`` and the planned pose.
     """
     limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, wheel_rate_max,
-                    steer_rate_max)
+                    steer_rate_max, curvature_radius_min)
     floor = _check_floor(floor)
     if not (isinstance(duration, int | float) and 0 < duration <= TYPICAL_MAX_DURATION):
         raise InputError(f"duration must be a number of seconds in (0, "
@@ -379,20 +386,33 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     shrink = 0.97
     speed = 1.0
     slower = 1.0  # speeds and rotation rates scaled down for the wheel-rate limit
+    wider = 1.0  # the least planned curvature radius scaled up for its limit
     last_error = ""
     for _attempt in range(10):
         caps = limits.scaled(DESIGN_MARGIN, pivot_margin, steer_margin)
         if slower != 1.0:
             caps = Limits(caps.v_max * slower, caps.a_max, caps.w_max * slower, caps.alpha_max,
-                          caps.pivot_rate_max, None, caps.steer_rate_max)
+                          caps.pivot_rate_max, None, caps.steer_rate_max,
+                          caps.curvature_radius_min)
         vm = v_max * slower
         v = min(0.8 * jitter, 0.85) * vm * speed
         v_corner = min(0.4 * vm * jitter, 0.9 * caps.a_max / (0.9 * caps.w_max)) * speed
+        w_corner = min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner)
+        w_spin, offset = 0.9 * caps.w_max, spin_offset
+        if caps.curvature_radius_min is not None:
+            # 002 eq. 26: R = |v|/|ω| ≥ R_min in corners and in the start's rotation, which
+            # turns about a point R_min / 0.9 (or farther) beside the base origin
+            # radius R_min / 0.9: as fast round it as the corner rate allows, up to cruise speed
+            r_plan = caps.curvature_radius_min * wider
+            v_corner = max(v_corner, min(v, w_corner * r_plan))
+            w_corner = min(w_corner, v_corner / r_plan, 0.9 * caps.a_max / v_corner)
+            if offset is not None:
+                offset = max(offset, r_plan)
+                w_spin = min(w_spin, v / offset, math.sqrt(0.9 * caps.a_max / offset))
         design = _Design(
             v=v, v_corner=v_corner, v_spin=0.2 * vm * speed,
-            w_corner=min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner),
-            w_spin=0.9 * caps.w_max, pause=1.0, spin=spin_offset is not None,
-            spin_offset=spin_offset or 0.0, side=side)
+            w_corner=w_corner, w_spin=w_spin, pause=1.0, spin=offset is not None,
+            spin_offset=offset or 0.0, side=side)
         try:
             segs = _typical_program(duration, caps, floor, pivots, design, order, shrink,
                                     steering)
@@ -414,6 +434,14 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             shrink *= 0.93
             last_error = "the planned run leaves the floor"
             continue
+        if curvature_radius_min is not None:
+            curve = curvature_report(traj.t, traj.twist(), platform.positions,
+                                     curvature_radius_min)
+            if not curve.ok:
+                wider *= 1.15
+                last_error = (f"curvature radius {curve.min_radius:.3g} m below "
+                              f"{curvature_radius_min:g} m")
+                continue
         if pivots is not None or steering is not None or wheel_rate_max is not None:
             columns = PlatformModel(platform).planned_columns if platform else []
             pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]),

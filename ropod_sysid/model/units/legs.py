@@ -226,6 +226,13 @@ class LeggedUnits:
     def torque_constants(self) -> np.ndarray:
         return self.wheel.torque_constants()
 
+    @property
+    def reach(self) -> float:
+        """The farthest the attachment point comes from the base origin over the leg's range
+        [m] (|h + λ a| is convex in λ: at an end of the range); planning keeps the centre of
+        rotation beyond it (002 eq. 26)."""
+        return float(np.linalg.norm(self.leg.point(np.asarray(self.leg.range)), axis=-1).max())
+
     def initial_angles(self, twist: np.ndarray) -> np.ndarray:
         """The wheel's, with the leg at the middle of its range (the wheel as if attached
         there)."""
