@@ -508,3 +508,74 @@ def test_cli_curvature_radius_default_and_errors(tmp_path: Path) -> None:
         assert lines[0] == (f"error: --curvature-radius-min {value}: must be a finite number "
                             "in [0, 1000] m")
     assert not out.exists()
+
+
+def test_optimize_plans_the_legs_within_every_limit(tmp_path: Path) -> None:
+    """``trajectory optimize`` searches the legs' extensions with the base motion: the
+    written CSVs carry every leg's plan, within its range and below the legs' rate limit,
+    moving, and not typical's plan on the same base motion; ``check`` on the written run (all
+    four variants) finds no limit broken — R_min (the platform's default) and the steering
+    rate among them — and no wheel at rest (type A), and the legs determine m_leg (with the
+    wheels' spin inertia) and their friction."""
+    from click.testing import CliRunner
+
+    from ropod_sysid.cli.main import main
+    from ropod_sysid.model.units.legs import LEG_RATE_MAX
+    from ropod_sysid.trajectory.setpoints import with_planned
+
+    out = tmp_path / "opt"
+    res = CliRunner().invoke(main, ["trajectory", "optimize", "--platform",
+                                    str(LEGS_DATA / "platform.yaml"), "--duration", "6",
+                                    "--harmonics", "1", "--maxiter", "1", "--objective", "cond",
+                                    "--v-max", "0.4", "--w-max", "0.5", "--floor", "-5", "5",
+                                    "-4", "4", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "note: planned with the base motion (on its progress while the base moves): leg 1 ±" \
+        in res.output
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    columns = PlatformModel(platform).planned_columns
+    back = {p.stem: read_trajectory_csv(p, columns) for p in out.glob("*.csv")}
+    assert sorted(back) == ["mirrored", "mirrored_negated", "negated", "original"]
+    run = back["original"]
+    typical_plan = with_planned(dataclasses.replace(run, planned={}), platform)
+    for c in columns:
+        lam = run.planned[c]
+        assert lam.min() >= 0.37 and lam.max() <= 0.56 and np.ptp(lam) > 0.01, c
+        assert np.abs(np.gradient(lam, run.t)).max() <= LEG_RATE_MAX
+        assert not np.allclose(lam, typical_plan.planned[c])
+        for vt in back.values():  # the variants share the plan
+            assert np.array_equal(vt.planned[c], lam)
+    limits = Limits(v_max=0.4, w_max=0.5, curvature_radius_min=0.81)
+    rep = check(run, platform, limits, FLOOR, params=json.loads((LEGS_DATA / "truth.json")
+                                                                .read_text()))
+    assert rep.ok, [f.text() for f in rep.findings]
+    assert rep.curvature is not None and rep.curvature.min_radius >= 0.81
+    assert rep.combinations["m_leg"] == "m_leg +100·Jrot_s"
+    legs = [rep.names.index(f"{f}_{u}") for f in ("flv", "flc") for u in "1234"]
+    assert np.isfinite(rep.relative_std[legs]).all() and rep.relative_std[legs].max() < 1.0
+
+
+def test_the_sigma_objective_weighs_the_legs_motion() -> None:
+    """``optimize``'s σ objective sees the legs' plan: on the same base motion, legs that
+    sweep more of their range at their fastest determine m_leg and the leg friction better
+    (a lower objective) than legs that barely move; with a target that names no leg
+    parameter the legs' plan still changes the run but hardly the objective's value."""
+    from ropod_sysid.noise import SensorNoise
+    from ropod_sysid.trajectory.excitation import _Objective, sigma_target
+
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    truth = json.loads((LEGS_DATA / "truth.json").read_text())
+    limits = Limits(v_max=0.4, w_max=0.5, pivot_rate_max=None, curvature_radius_min=0.81)
+    leg_names = ["m_leg", *(f"{f}_{u}" for f in ("flv", "flc") for u in "1234")]
+    values = {}
+    for target in (leg_names, ["m_b"]):
+        sig = sigma_target(platform, target, "per-wheel", SensorNoise(), truth)
+        obj = _Objective(platform, 10.0, 2, limits, FLOOR, "sigma", "per-wheel", 10.0, 2.0,
+                         sig)
+        base = np.random.default_rng(1).uniform(-1, 1, obj.n_base)
+        wide = np.concatenate([base, np.tile([1.0, 1.0, 0.0], 4)])
+        small = np.concatenate([base, np.tile([0.0, 0.0, 0.0], 4)])
+        values[target[0]] = obj(np.stack([wide, small], axis=1))
+    wide_v, small_v = values["m_leg"]
+    assert wide_v < small_v - 2.0  # σ smaller by more than a factor e² (geometric mean)
+    assert abs(values["m_b"][0] - values["m_b"][1]) < 0.2
