@@ -4,11 +4,12 @@ Limits and where they are broken, the floor, the unit angles predicted along all
 by every unit type (:func:`ropod_sysid.trajectory.prediction.predict_angles`): turning rates and
 flags of the types that have them (the swivel: pivot rates of eq. 8a and wheel flips), steering
 rates of the types with an actuated steering (the steered wheel) and the rate of every driven
-wheel; on platforms with constraint rows (steered wheels) the time spent near a singular
-configuration, where the fit leaves out the base rows (:func:`singular_report`); and the
-identifiability the run promises: the condition number and rank of the stacked regressor
-A_ID,ext of the four variants and the predicted standard deviation of every parameter
-(:mod:`ropod_sysid.trajectory.identifiability`).
+wheel; the base's least curvature radius over the moving time (002 eq. 26,
+:func:`curvature_report`); on platforms with constraint rows (steered wheels) the time spent
+near a singular configuration, where the fit leaves out the base rows
+(:func:`singular_report`); and the identifiability the run promises: the condition number and
+rank of the stacked regressor A_ID,ext of the four variants and the predicted standard
+deviation of every parameter (:mod:`ropod_sysid.trajectory.identifiability`).
 """
 
 from __future__ import annotations
