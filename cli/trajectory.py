@@ -24,7 +24,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.trajectory import MAX_HARMONICS, OPTIMIZE_DURATION, TYPICAL_MAX_DURATION
 from ropod_sysid.trajectory.excitation import OBJECTIVES
-from ropod_sysid.trajectory.limits import STEER_RATE_MAX
+from ropod_sysid.trajectory.limits import CURVATURE_REACH_FACTOR, STEER_RATE_MAX
 
 OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
              "negated": "negated.csv", "mirrored_negated": "mirrored_negated.csv"}
@@ -32,7 +32,7 @@ OUT_FILES = {"original": "original.csv", "mirrored": "mirrored.csv",
 
 def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
     """--v-max, --a-max, --w-max, --alpha-max, --pivot-rate-max/--no-pivot-limit,
-    --steer-rate-max, --wheel-rate-max, --floor."""
+    --steer-rate-max, --wheel-rate-max, --curvature-radius-min, --floor."""
     options = [
         click.option("--v-max", default=1.0, show_default=True, type=positive(),
                      help="Speed limit |v| [m/s]."),
@@ -54,6 +54,15 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--wheel-rate-max", default=None, type=positive("rad/s"),
                      help="Rate limit |φ̇| of every driven wheel [rad/s] (any unit type; not "
                           "the steering motors) [default: none]."),
+        click.option("--curvature-radius-min", default=None, type=Number(0, 1000, unit="m"),
+                     help="Least curvature radius R = |v|/|ω| of the base wherever it rotates "
+                          "while moving [m] (Robuffo Giordano et al. (002) eq. 26: the centre "
+                          "of rotation stays outside the footprint, so no wheel on a held leg "
+                          "comes to rest, a type-A singularity; a rotation in place has R = 0 "
+                          "and is not allowed); 0: no limit [default: for a platform with legs "
+                          f"{CURVATURE_REACH_FACTOR:g} × the farthest reach of a leg's "
+                          "attachment point, rounded up to the cm (0.81 m for "
+                          "datasets/legs; 002: 0.82 m), none without legs]."),
         click.option("--floor", nargs=4, type=float, default=None,
                      metavar="XMIN XMAX YMIN YMAX",
                      help="Floor rectangle for the base origin [m], start at (0, 0) "
@@ -66,14 +75,22 @@ def limit_options(func: Callable[..., Any]) -> Callable[..., Any]:
 
 def _limits(v_max: float, a_max: float, w_max: float, alpha_max: float,
             pivot_rate_max: float, no_pivot_limit: bool, wheel_rate_max: float | None,
-            steer_rate_max: float = STEER_RATE_MAX) -> Any:
+            steer_rate_max: float = STEER_RATE_MAX, curvature_radius_min: float | None = None,
+            platform: Platform | None = None) -> Any:
+    """The limits of the options; ``--curvature-radius-min`` not given: the platform's default
+    (:func:`~ropod_sysid.trajectory.limits.default_curvature_radius`), 0: none."""
     from ropod_sysid.trajectory import Limits
+    from ropod_sysid.trajectory.limits import default_curvature_radius
 
     if no_pivot_limit and given("pivot_rate_max"):
         raise InputError(f"--pivot-rate-max {pivot_rate_max:g} and --no-pivot-limit: give one "
                          "of them")
+    if curvature_radius_min is None:
+        r_min = None if platform is None else default_curvature_radius(platform)
+    else:
+        r_min = curvature_radius_min or None
     return Limits(v_max, a_max, w_max, alpha_max, None if no_pivot_limit else pivot_rate_max,
-                  wheel_rate_max, steer_rate_max)
+                  wheel_rate_max, steer_rate_max, r_min)
 
 
 def _singular_note(traj: Any, platform: Platform | None) -> str | None:
@@ -89,6 +106,20 @@ def _singular_note(traj: Any, platform: Platform | None) -> str | None:
     return (f"near singular configurations (the fit leaves out the base rows): "
             f"{100 * rep.moving_fraction.max():.1f} % of the moving time, longest "
             f"{rep.longest.max():.2f} s (see trajectory check)")
+
+
+def _curvature_note(traj: Any, platform: Platform | None, limits: Any) -> str | None:
+    """One line on the run's least curvature radius against the limit, None without one."""
+    if limits.curvature_radius_min is None:
+        return None
+    from ropod_sysid.platform import ropod_platform
+    from ropod_sysid.trajectory.precheck import curvature_report
+
+    rep = curvature_report(traj.t, traj.twist(), (platform or ropod_platform()).positions,
+                           limits.curvature_radius_min)
+    least = f"{rep.min_radius:.3g} m" if rep.min_radius < float("inf") else "inf"
+    return (f"curvature radius while moving: least {least} (R_min "
+            f"{limits.curvature_radius_min:g} m, 002 eq. 26: no rotation in place)")
 
 
 def _floor(floor: tuple[float, ...] | None) -> tuple[float, float, float, float]:
@@ -198,23 +229,28 @@ def output_options(func: Callable[..., Any]) -> Callable[..., Any]:
         folder_files=OUT_FILES.values())
 def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                     pivot_rate_max: float, no_pivot_limit: bool, steer_rate_max: float,
-                    wheel_rate_max: float | None, floor: tuple[float, ...], duration: float,
+                    wheel_rate_max: float | None, curvature_radius_min: float | None,
+                    floor: tuple[float, ...], duration: float,
                     platform_path: str | None, seed: int, dt: float, out: str,
                     quiet: bool) -> None:
     """Write a typical run and its three variants (mirrored, negated, mirrored-negated)."""
     from ropod_sysid.trajectory import typical
 
-    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
-                     wheel_rate_max, steer_rate_max)
     platform = _platform(platform_path)
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
+                     wheel_rate_max, steer_rate_max, curvature_radius_min, platform)
     traj = typical(duration, limits.v_max, limits.a_max, limits.w_max, limits.alpha_max,
                    _floor(floor), dt, seed, limits.pivot_rate_max, platform,
-                   limits.wheel_rate_max, limits.steer_rate_max)
+                   limits.wheel_rate_max, limits.steer_rate_max,
+                   limits.curvature_radius_min)
     written = _write_variants(traj, out)
     if not quiet:
         click.echo(f"typical run: {traj.duration:g} s, {traj.n_samples} setpoints; wrote "
                    + ", ".join(str(p) for p in written))
         note = _singular_note(traj, platform)
+        if note:
+            click.echo(note)
+        note = _curvature_note(traj, platform, limits)
         if note:
             click.echo(note)
 
@@ -254,7 +290,7 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
         folders={"out": "--out"}, folder_files=OUT_FILES.values())
 def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                      pivot_rate_max: float, no_pivot_limit: bool, steer_rate_max: float,
-                     wheel_rate_max: float | None,
+                     wheel_rate_max: float | None, curvature_radius_min: float | None,
                      floor: tuple[float, ...], platform_path: str, duration: float,
                      harmonics: int, objective: str, target: str, current_noise: float | None,
                      encoder_counts: int | None, exact_encoders: bool, log_rate: float,
@@ -264,9 +300,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
     is best conditioned); write it and its variants."""
     from ropod_sysid.trajectory import optimize
 
-    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
-                     wheel_rate_max, steer_rate_max)
     platform = load_platform(platform_path)
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
+                     wheel_rate_max, steer_rate_max, curvature_radius_min, platform)
     sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=True)
     params = _params(params_path, platform)
     targets: str | list[str] = (target if target in ("inertial", "all")
@@ -289,6 +325,9 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
         singular = _singular_note(result.trajectory, platform)
         if singular:
             click.echo(singular)
+        curvature = _curvature_note(result.trajectory, platform, limits)
+        if curvature:
+            click.echo(curvature)
         click.echo("wrote " + ", ".join(str(p) for p in written))
 
 
@@ -319,25 +358,26 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float, w_max: float,
                   alpha_max: float, pivot_rate_max: float, no_pivot_limit: bool,
                   steer_rate_max: float, wheel_rate_max: float | None,
-                  floor: tuple[float, ...], noise: float,
+                  curvature_radius_min: float | None, floor: tuple[float, ...], noise: float,
                   current_noise: float | None, encoder_counts: int | None,
                   exact_encoders: bool, log_rate: float, friction: str,
                   params_path: str | None, plot_path: str | None, as_json: bool) -> None:
     """Check a setpoint CSV before a run: limits broken and where, pivot rates and wheel flips
     (units with a pivot), steering rates (steered units), wheel rates (every driven wheel), the
-    time near singular configurations (platforms with constraint rows: the fit leaves out the
+    least curvature radius while moving (with a limit: platforms with legs), the time near
+    singular configurations (platforms with constraint rows: the fit leaves out the
     base rows there), the predicted condition number and rank of the four variants' stacked
     regressor, and the predicted standard deviation of every parameter. Findings are reported,
     not errors (exit 0)."""
     from ropod_sysid.trajectory import check, plot, read_trajectory_csv
 
-    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
-                     wheel_rate_max, steer_rate_max)
     if plot_path is not None and Path(plot_path).suffix.lower() not in (".png", ".svg"):
         raise InputError(f"--plot {plot_path}: use a .png or .svg file name")
     from ropod_sysid.model import PlatformModel
 
     platform = load_platform(platform_path)
+    limits = _limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, no_pivot_limit,
+                     wheel_rate_max, steer_rate_max, curvature_radius_min, platform)
     traj = read_trajectory_csv(traj_path, PlatformModel(platform).planned_columns)
     params = _params(params_path, platform)
     fl = _floor(floor)

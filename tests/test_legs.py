@@ -19,8 +19,8 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import Parameters, parameter_names
 from ropod_sysid.platform import load_platform, platform_from_dict
 from ropod_sysid.simulate import derivatives, rk4_step
-from ropod_sysid.trajectory import check, read_trajectory_csv, typical
-from ropod_sysid.trajectory.limits import Limits
+from ropod_sysid.trajectory import Trajectory, check, read_trajectory_csv, typical
+from ropod_sysid.trajectory.limits import Limits, default_curvature_radius
 from ropod_sysid.trajectory.prediction import predict_angles
 from tests.test_steered import advanced
 
@@ -411,3 +411,171 @@ def test_cli_simulates_the_planned_legs_and_converts_their_logs(tmp_path: Path) 
     assert np.array_equal(again.angles, log.angles) and np.array_equal(again.t, log.t)
     res = run.invoke(main, ["inspect", str(out), "--platform", str(LEGS_DATA / "platform.yaml")])
     assert res.exit_code == 0 and "leg_1" in res.output, res.output
+
+
+def circle_run(radius: float, speed: float = 0.2, duration: float = 4.0) -> Trajectory:
+    """From rest along a circle of ``radius`` [m] (0: a rotation in place at 0.3 rad/s) at
+    ``speed`` [m/s] and back to rest, minimum-jerk ramps of 1 s."""
+    t = np.linspace(0.0, duration, int(duration / 0.01) + 1)
+    x = np.clip(np.minimum(t, duration - t), 0.0, 1.0)
+    ramp = x**3 * (10 - 15 * x + 6 * x * x)
+    vx = speed * ramp if radius else 0.0 * ramp
+    omega = speed * ramp / radius if radius else 0.3 * ramp
+    return Trajectory.from_twist(t, vx, 0.0 * t, omega)
+
+
+def test_check_flags_a_curvature_radius_below_its_limit() -> None:
+    """002 eq. 26: R = |v|/|ω| ≥ R_min while the base moves. ``check`` reports the least R
+    over the moving time and the fraction below R_min, and flags each stretch below it (the
+    least R in it, all variants); a rotation in place (R = 0) and a circle of 0.5 m break
+    0.81 m, a circle of 1 m does not, and without the limit nothing is flagged."""
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    params = {"m_b": 126.0, "Jzz_b": 8.0}
+    limits = Limits(v_max=0.4, w_max=0.5, pivot_rate_max=None, curvature_radius_min=0.81)
+    tight = check(circle_run(0.5), platform, limits, FLOOR, params=params)
+    assert not tight.ok
+    (finding,) = [f for f in tight.findings if f.what == "curvature radius R [m] (moving)"]
+    assert finding.below and finding.peak == pytest.approx(0.5) and finding.limit == 0.81
+    # the moving time: some attachment point at 1 cm/s or faster (0.16 s into the ramp)
+    assert finding.variant == "all" and (finding.t_start, finding.t_end) == (0.16, 3.84)
+    assert finding.text().startswith("curvature radius R [m] (moving): 0.5 < 0.81 from t=")
+    assert tight.curvature is not None and tight.curvature.moving_fraction == 1.0
+    assert tight.to_dict()["curvature"]["min_radius"] == pytest.approx(0.5)
+    spin = check(circle_run(0.0), platform, limits, FLOOR, params=params)
+    assert spin.curvature is not None and spin.curvature.min_radius == 0.0
+    assert not spin.ok and spin.to_dict()["ok"] is False
+    wide = check(circle_run(1.0), platform, limits, FLOOR, params=params)
+    assert wide.ok, [f.text() for f in wide.findings]
+    assert wide.curvature is not None and wide.curvature.min_radius == pytest.approx(1.0)
+    assert wide.curvature.moving_fraction == 0.0
+    free = check(circle_run(0.5), platform, dataclasses.replace(limits,
+                                                                curvature_radius_min=None),
+                 FLOOR, params=params)
+    assert free.ok and free.to_dict()["limits"]["curvature_radius_min"] is None
+
+
+def test_typical_keeps_the_curvature_radius() -> None:
+    """With R_min (002 eq. 26; the platform's default: 1.3 × the legs' reach, 0.81 m here)
+    ``typical`` rotates only about points at least R_min away — no rotation in place — and
+    its legs' plan brings no wheel to rest (type A): ``check`` finds nothing, and the base
+    still turns (the least R is finite)."""
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    r_min = default_curvature_radius(platform)
+    assert r_min == 0.81
+    assert default_curvature_radius(load_platform(LEGS_DATA.parent / "steered"
+                                                  / "platform.yaml")) is None
+    traj = typical(duration=20.0, v_max=0.4, w_max=0.5, pivot_rate_max=None, floor=FLOOR,
+                   platform=platform, curvature_radius_min=r_min)
+    rep = check(traj, platform, dataclasses.replace(LIMITS, pivot_rate_max=None,
+                                                    curvature_radius_min=r_min),
+                FLOOR, params={"m_b": 126.0, "Jzz_b": 8.0})
+    assert rep.ok, [f.text() for f in rep.findings]
+    assert rep.curvature is not None and r_min <= rep.curvature.min_radius < 1.5
+    assert np.abs(traj.omega).max() > 0.2 and np.ptp(traj.planned["leg_1"]) > 0.05
+
+
+def test_cli_curvature_radius_default_and_errors(tmp_path: Path) -> None:
+    """The CLI's R_min defaults to the platform's (0.81 m with legs): the shipped legs run,
+    planned before the limit, starts with a rotation in place and is flagged (exit 0, ``ok``
+    false, the finding in the JSON); ``--curvature-radius-min 0`` lifts the limit; a bad value
+    is a one-line error that writes nothing."""
+    from click.testing import CliRunner
+
+    from ropod_sysid.cli.main import main
+
+    run = CliRunner()
+    args = ["trajectory", "check", str(LEGS_DATA / "trajectory" / "original.csv.gz"),
+            "--platform", str(LEGS_DATA / "platform.yaml"), "--params",
+            str(LEGS_DATA / "truth.json"), "--v-max", "0.4", "--w-max", "0.5", "--floor",
+            "-5", "5", "-4", "4", "--json"]
+    res = run.invoke(main, args)
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["ok"] is False and data["limits"]["curvature_radius_min"] == 0.81
+    assert data["curvature"]["min_radius"] == 0.0 and data["curvature"]["ok"] is False
+    assert 0.5 < data["curvature"]["moving_fraction"] < 1.0
+    assert [f["what"] for f in data["findings"]] == ["curvature radius R [m] (moving)"]
+    res = run.invoke(main, [*args, "--curvature-radius-min", "0"])
+    data = json.loads(res.output)
+    assert data["ok"] is True and data["curvature"]["limit"] is None
+    out = tmp_path / "x"
+    for value in ("-1", "nan"):
+        res = run.invoke(main, ["trajectory", "typical", "--platform",
+                                str(LEGS_DATA / "platform.yaml"), "--out", str(out),
+                                "--curvature-radius-min", value])
+        lines = [x for x in res.output.splitlines() if x.strip()]
+        assert res.exit_code == 2 and len(lines) == 1, res.output
+        assert lines[0] == (f"error: --curvature-radius-min {value}: must be a finite number "
+                            "in [0, 1000] m")
+    assert not out.exists()
+
+
+def test_optimize_plans_the_legs_within_every_limit(tmp_path: Path) -> None:
+    """``trajectory optimize`` searches the legs' extensions with the base motion: the
+    written CSVs carry every leg's plan, within its range and below the legs' rate limit,
+    moving, and not typical's plan on the same base motion; ``check`` on the written run (all
+    four variants) finds no limit broken — R_min (the platform's default) and the steering
+    rate among them — and no wheel at rest (type A), and the legs determine m_leg (with the
+    wheels' spin inertia) and their friction."""
+    from click.testing import CliRunner
+
+    from ropod_sysid.cli.main import main
+    from ropod_sysid.model.units.legs import LEG_RATE_MAX
+    from ropod_sysid.trajectory.setpoints import with_planned
+
+    out = tmp_path / "opt"
+    res = CliRunner().invoke(main, ["trajectory", "optimize", "--platform",
+                                    str(LEGS_DATA / "platform.yaml"), "--duration", "6",
+                                    "--harmonics", "1", "--maxiter", "1", "--objective", "cond",
+                                    "--v-max", "0.4", "--w-max", "0.5", "--floor", "-5", "5",
+                                    "-4", "4", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "note: planned with the base motion (on its progress while the base moves): leg 1 ±" \
+        in res.output
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    columns = PlatformModel(platform).planned_columns
+    back = {p.stem: read_trajectory_csv(p, columns) for p in out.glob("*.csv")}
+    assert sorted(back) == ["mirrored", "mirrored_negated", "negated", "original"]
+    run = back["original"]
+    typical_plan = with_planned(dataclasses.replace(run, planned={}), platform)
+    for c in columns:
+        lam = run.planned[c]
+        assert lam.min() >= 0.37 and lam.max() <= 0.56 and np.ptp(lam) > 0.01, c
+        assert np.abs(np.gradient(lam, run.t)).max() <= LEG_RATE_MAX
+        assert not np.allclose(lam, typical_plan.planned[c])
+        for vt in back.values():  # the variants share the plan
+            assert np.array_equal(vt.planned[c], lam)
+    limits = Limits(v_max=0.4, w_max=0.5, curvature_radius_min=0.81)
+    rep = check(run, platform, limits, FLOOR, params=json.loads((LEGS_DATA / "truth.json")
+                                                                .read_text()))
+    assert rep.ok, [f.text() for f in rep.findings]
+    assert rep.curvature is not None and rep.curvature.min_radius >= 0.81
+    assert rep.combinations["m_leg"] == "m_leg +100·Jrot_s"
+    legs = [rep.names.index(f"{f}_{u}") for f in ("flv", "flc") for u in "1234"]
+    assert np.isfinite(rep.relative_std[legs]).all() and rep.relative_std[legs].max() < 1.0
+
+
+def test_the_sigma_objective_weighs_the_legs_motion() -> None:
+    """``optimize``'s σ objective sees the legs' plan: on the same base motion, legs that
+    sweep more of their range at their fastest determine m_leg and the leg friction better
+    (a lower objective) than legs that barely move; with a target that names no leg
+    parameter the legs' plan still changes the run but hardly the objective's value."""
+    from ropod_sysid.noise import SensorNoise
+    from ropod_sysid.trajectory.excitation import _Objective, sigma_target
+
+    platform = load_platform(LEGS_DATA / "platform.yaml")
+    truth = json.loads((LEGS_DATA / "truth.json").read_text())
+    limits = Limits(v_max=0.4, w_max=0.5, pivot_rate_max=None, curvature_radius_min=0.81)
+    leg_names = ["m_leg", *(f"{f}_{u}" for f in ("flv", "flc") for u in "1234")]
+    values = {}
+    for target in (leg_names, ["m_b"]):
+        sig = sigma_target(platform, target, "per-wheel", SensorNoise(), truth)
+        obj = _Objective(platform, 10.0, 2, limits, FLOOR, "sigma", "per-wheel", 10.0, 2.0,
+                         sig)
+        base = np.random.default_rng(1).uniform(-1, 1, obj.n_base)
+        wide = np.concatenate([base, np.tile([1.0, 1.0, 0.0], 4)])
+        small = np.concatenate([base, np.tile([0.0, 0.0, 0.0], 4)])
+        values[target[0]] = obj(np.stack([wide, small], axis=1))
+    wide_v, small_v = values["m_leg"]
+    assert wide_v < small_v - 2.0  # σ smaller by more than a factor e² (geometric mean)
+    assert abs(values["m_b"][0] - values["m_b"][1]) < 0.2

@@ -8,7 +8,8 @@ and four 6 kg leg carriages — about 150 kg —, 001's steering and wheel inert
 coefficients and a linear guide's leg friction, −15 N s/m and −4 N, ±10 % per unit),
 ``trajectory/*.csv.gz`` (the setpoints of the four variants with the legs' planned
 extensions, as ``ropod-sysid trajectory typical --platform datasets/legs/platform.yaml
---duration 30 --v-max 0.4 --w-max 0.5 --floor -5 5 -4 4`` writes them) and
+--duration 30 --v-max 0.4 --w-max 0.5 --floor -5 5 -4 4 --curvature-radius-min 0`` writes
+them: the sample predates the least curvature radius, whose default now plans another run) and
 ``original.csv.gz`` … ``mirrored_negated.csv.gz``: 250 Hz logs with 2¹⁴-count angle encoders
 (the leg extensions exact), 30 mA current noise and 0.5 ms timestamp jitter, under 002's
 low-level control: PI speed loops on the drives (kp 20 N m s/rad, ki 200 N m/rad, 30 N m

@@ -24,14 +24,18 @@ side) when P_i reverses or passes near zero while turning. Limits, as in the the
 experiments: |v| = |(vx, vy)| ≤ v_max, |a| ≤ a_max (the world acceleration of the base origin,
 centripetal part included), |ω| ≤ ω_max, |ω̇| ≤ α_max, |δ̇_i| ≤ pivot_rate_max (units with a
 turning joint), |β̇_i| ≤ steer_rate_max (units with an actuated steering: the steered wheel, whose
-planned steering follows its wheel-centre velocity) and optionally |φ̇| ≤ wheel_rate_max for
-every driven wheel. Omni wheels have no turning joint: there are no wheel flips to plan for.
+planned steering follows its wheel-centre velocity), optionally |φ̇| ≤ wheel_rate_max for
+every driven wheel and the base's curvature radius R = |v|/|ω| ≥ curvature_radius_min wherever
+it rotates (002 eq. 26: the centre of rotation outside the footprint, so no wheel on a held leg
+comes to rest; by default for platforms with legs). Omni wheels have no turning joint: there
+are no wheel flips to plan for.
 Steered wheels add constraint rows, which lose rank where all wheel axles lie on one line; the
 fit leaves out the base rows near there, and ``check`` reports the time a run spends there.
 
 Modules (every public name is re-exported here):
 
-* :mod:`~ropod_sysid.trajectory.limits` — :class:`Limits`, the floor, :class:`PlanningError`;
+* :mod:`~ropod_sysid.trajectory.limits` — :class:`Limits`, the floor, :class:`PlanningError`,
+  :func:`default_curvature_radius`;
 * :mod:`~ropod_sysid.trajectory.setpoints` — :class:`Trajectory`, :func:`integrate_pose` and the
   setpoint CSV (:func:`read_trajectory_csv`, :func:`write_trajectory_csv`);
 * :mod:`~ropod_sysid.trajectory.run_variants` — :func:`variant`, :func:`variants`;
@@ -41,7 +45,8 @@ Modules (every public name is re-exported here):
 * :mod:`~ropod_sysid.trajectory.typical_run` — :func:`typical`;
 * :mod:`~ropod_sysid.trajectory.identifiability` — :func:`conditioning`, :func:`predicted_std`;
 * :mod:`~ropod_sysid.trajectory.precheck` — :func:`check` (limits, floor, pivot, steering and
-  wheel rates, the time near singular configurations (:func:`singular_report`), the predicted
+  wheel rates, the curvature radius (:func:`curvature_report`), the time near singular
+  configurations (:func:`singular_report`), the predicted
   stacked regressor's condition number and rank and each parameter's predicted standard
   deviation);
 * :mod:`~ropod_sysid.trajectory.plotting` — :func:`plot`;
@@ -71,12 +76,14 @@ from ropod_sysid.trajectory.identifiability import (
     predicted_std,
 )
 from ropod_sysid.trajectory.limits import (
+    CURVATURE_REACH_FACTOR,
     DEFAULT_FLOOR,
     PIVOT_DESIGN_MARGIN,
     STEER_RATE_MAX,
     Floor,
     Limits,
     PlanningError,
+    default_curvature_radius,
 )
 from ropod_sysid.trajectory.limits import _check_floor as _check_floor
 from ropod_sysid.trajectory.pivots import PivotPrediction, predict_pivots, trailing_pivots
@@ -84,9 +91,12 @@ from ropod_sysid.trajectory.plotting import plot
 from ropod_sysid.trajectory.precheck import (
     MOVING_SPEED,
     CheckReport,
+    CurvatureReport,
     Finding,
     SingularReport,
     check,
+    curvature_radius,
+    curvature_report,
     run_singular_report,
     singular_report,
     true_parameters,
@@ -119,15 +129,17 @@ from ropod_sysid.trajectory.typical_run import (
 )
 
 __all__ = [
-    "COLUMNS", "DEFAULT_FLOOR", "DESIGN_MARGIN", "KAPPA_FRACTION", "LOBES", "MAX_HARMONICS",
+    "COLUMNS", "CURVATURE_REACH_FACTOR", "DEFAULT_FLOOR", "DESIGN_MARGIN", "KAPPA_FRACTION",
+    "LOBES", "MAX_HARMONICS",
     "MAX_LAG", "MOVING_SPEED", "NU_MIN", "OPTIMIZE_DURATION", "PIVOT_DESIGN_MARGIN",
     "POSE_COLUMNS", "RANK_TOL", "RHO_BETA", "RHO_KAPPA", "SIDE_DIRECTIONS", "SPEED_WEIGHT",
     "SPIN_OFFSETS", "SPIN_START_MIN", "STEER_RATE_MAX", "TWIST_COLUMNS", "TYPICAL_MAX_DURATION",
     "VARIANTS", "VARIANT_SIGNS",
-    "CheckReport", "Conditioning", "Finding", "Floor", "FourierFamily", "Limits",
+    "CheckReport", "Conditioning", "CurvatureReport", "Finding", "Floor", "FourierFamily", "Limits",
     "OptimizeResult", "PivotPrediction", "PlanningError", "Prediction", "SingularReport",
     "Trajectory",
-    "check", "conditioning", "integrate_pose", "optimize", "plot", "predict_angles",
+    "check", "conditioning", "curvature_radius", "curvature_report",
+    "default_curvature_radius", "integrate_pose", "optimize", "plot", "predict_angles",
     "predict_pivots", "predicted_std", "read_trajectory_csv", "run_singular_report",
     "singular_report", "steering_points", "trailing_pivots",
     "trailing_points", "trajectory_csv_text", "true_parameters", "typical",

@@ -6,9 +6,11 @@ the best condition number (or log-determinant) of the stacked regressor A_ID,ext
 variants (Sec. VI-A, VI-C), unit angles in each type's quasi-steady closed form
 (:meth:`UnitType.quasi_steady_angles`: swivel units trailing their pivots, eq. 8a; omni wheels
 integrating their rates; steered wheels along their planned steering), within the limits [m/s,
-m/s², rad/s, rad/s², the pivot and steering rates, and optionally the wheel rates] and the floor
-[m]. Any mix of unit types. On platforms with constraint rows (steered wheels) the samples near a
-singular configuration, whose base rows the fit leaves out, are penalised as well.
+m/s², rad/s, rad/s², the pivot and steering rates, and optionally the wheel rates and the least
+curvature radius, 002 eq. 26] and the floor [m]. Any mix of unit types. On platforms with
+constraint rows (steered wheels) the samples near a singular configuration, whose base rows the
+fit leaves out, are penalised as well. Units that plan coordinates of their own (a leg's
+extension) add the numbers that choose their plan (:meth:`plan_search`) to the search.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from ropod_sysid.trajectory.limits import (
 from ropod_sysid.trajectory.precheck import stacked_regressor
 from ropod_sysid.trajectory.prediction import _variant_prediction, predict_angles
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, _off_floor, variants
-from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
+from ropod_sysid.trajectory.setpoints import Trajectory
 
 OPTIMIZE_DURATION = (5.0, 600.0)  # optimize(): shortest and longest run [s]
 MAX_HARMONICS = 20  # optimize(): most harmonics of each Fourier series
@@ -48,6 +50,7 @@ SPEED_WEIGHT = 0.5  # optimize(): weight of −log(mean speed / v_max) in the ob
 SINGULAR_WEIGHT = 1.0  # optimize(): weight of the fraction of samples near singular
 MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
 SIGMA_RERANK = 6  # optimize("sigma"): candidates within the limits weighed by check at the end
+CURVATURE_MARGIN = 0.95  # optimize(): the least curvature radius is planned at R_min / this
 OBJECTIVES = ("sigma", "cond", "logdet")  # optimize(): what it minimises (the first: default)
 
 
@@ -64,6 +67,8 @@ class OptimizeResult:
     structural_rank : rank of the regressor the search found (identifiable subspace dimension)
     coefficients : (3, 2H+1) Fourier coefficients of speed, direction, curvature
     speed_scale : s_v [m/s]; evaluations, generations, seconds : the search's cost
+    plan : the numbers in [0, 1] that chose the units' own plans (a leg's amplitude, frequency
+        and phase: :meth:`plan_search`), per planning unit in the platform's group order
     """
 
     trajectory: Trajectory
@@ -80,6 +85,7 @@ class OptimizeResult:
     notes: list[str] = field(default_factory=list)
     targets: dict[str, float] = field(default_factory=dict)  # "sigma": name → predicted rel. σ
     target_bias: dict[str, float] = field(default_factory=dict)  # name → predicted rel. bias
+    plan: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class _Objective:
@@ -99,9 +105,12 @@ class _Objective:
         self.friction = friction
         n = int(math.ceil(duration * grid_rate))
         self.t = np.linspace(0.0, duration, n + 1)
-        r_max = float(np.linalg.norm(self.positions, axis=1).max())
-        self.family = FourierFamily(duration, harmonics, self.t, r_max,
-                                    limits.pivot_rate_max or 1.5)
+        self.family = _family(platform, duration, harmonics, self.t, limits)
+        self.n_base = self.family.n_coefficients
+        # units that plan own coordinates (legs): their plan's numbers follow the base's
+        self.planners = [(unit, int(unit.plan_dimensions)) for _, unit in self.model.groups
+                         if hasattr(unit, "plan_search")]
+        self.n_plan = sum(d for _, d in self.planners)
         step = max(int(round(grid_rate / eval_rate)), 1)
         self.eval_idx = np.arange(step // 2 + 1, n, step)  # interior samples (not at rest)
         self.rank: int | None = None
@@ -116,7 +125,19 @@ class _Objective:
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Twist and its rate (S, N, 3) at the largest speed scale s_v within the limits and the
         floor (all four variants) times ``margin``, and s_v (S,)."""
-        return _scaled_twist(self.family, coef, self.limits, self.floor, self.t, margin)
+        return _scaled_twist(self.family, coef[:, :self.n_base], self.limits, self.floor,
+                             self.t, margin)
+
+    def planned(self, t: np.ndarray, tw: np.ndarray, coef: np.ndarray) -> np.ndarray | None:
+        """The units' planned own coordinates (S, N, L) (:attr:`PlatformModel.planned_columns`
+        order) along the candidates' twists (S, N, 3) at times t; None without any."""
+        if not self.planners:
+            return None
+        out, k = [], self.n_base
+        for unit, d in self.planners:
+            out += list(unit.plan_search(t, tw, coef[:, k:k + d]).values())
+            k += d
+        return np.stack(out, axis=-1)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Objective values (S,) for coefficients x (D, S) (scipy's vectorised layout)."""
@@ -132,7 +153,10 @@ class _Objective:
         signs = np.array([VARIANT_SIGNS[v] for v in VARIANTS])  # (4, 3)
         tw_v = tw[:, None] * signs[None, :, None, :]
         twd_v = twd[:, None] * signs[None, :, None, :]
-        pred = predict_angles(self.t, tw_v, self.model, twist_rates=twd_v)
+        legs = self.planned(self.t, tw, coef)  # the four variants share the plan
+        planned = None if legs is None else np.broadcast_to(
+            legs[:, None], (legs.shape[0], 4, *legs.shape[1:]))
+        pred = predict_angles(self.t, tw_v, self.model, twist_rates=twd_v, planned=planned)
         assert pred.lag is not None
         lag = np.abs(pred.lag[:, :2]).max(axis=(1, 2, 3))  # negated variants: the same
         penalty = np.maximum(lag / MAX_LAG - 1.0, 0.0)
@@ -200,7 +224,10 @@ class _Objective:
         if self.variances is None:
             self.variances = row_variances(self.model, st, sig.truth_params, sig.sensors,
                                            self.friction).mean(axis=0)
-            self.columns = sig.columns(a[0])
+            # the fit's columns of the candidate that excites the most of them (a leg that
+            # hardly moves in one candidate leaves its columns out of that one's)
+            excited = (np.linalg.norm(a, axis=(1, 2)) > 0).sum(axis=1)
+            self.columns = sig.columns(a[int(np.argmax(excited))])
         cols = self.columns
         assert cols is not None
         b = np.einsum("srdp,p->srd", a, sig.truth)
@@ -315,9 +342,20 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     80 % of their limit, and quasi-steady lags of a unit behind its pivot with
     sin > 0.35 (a unit cannot follow a pivot that barely moves), are penalised; −0.5 log(mean
     speed / v_max) is added as a tie-breaker towards brisk runs, which the column-scaled
-    regressor cannot see. scipy's differential evolution searches
+    regressor cannot see. With a least curvature radius (002 eq. 26) the family's curvature is
+    capped at 0.95 / R_min, so every candidate keeps it. scipy's differential evolution searches
     the coefficients (seeded, vectorised over the population); the best candidate whose limits,
     floor and pivot rates integrated on the fine grid all hold is returned.
+
+    Units that plan coordinates of their own add them to the search: a leg's extension is
+    :meth:`~ropod_sysid.model.units.legs.LeggedUnits.leg_profile` (a sinusoid on a progress
+    gated on the base's speed at the leg, as ``typical`` plans it, so that no wheel comes to
+    rest: 002 §III-C's type A) whose amplitude, frequency and phase are three more numbers
+    of the search (:meth:`~ropod_sysid.model.units.legs.LeggedUnits.plan_search`), within the
+    leg's range and rate. The regressor then has the legs' rows, so ``"sigma"`` weighs how
+    well m_leg and the leg friction are determined when the targets name them (``"all"``,
+    ``"inertial"`` for m_leg); a candidate whose integrated prediction flags a wheel at rest
+    is refused.
 
     Parameters
     ----------
@@ -357,11 +395,12 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
         raise InputError(f"maxiter must be a positive integer, got {maxiter!r}")
     check_variant(friction)
     t_start = time.monotonic()
+    model = PlatformModel(platform)
     sigma = (sigma_target(platform, target, friction, sensors or SensorNoise(), params)
              if objective == "sigma" else None)
     obj = _Objective(platform, float(duration), harmonics, limits, floor, objective, friction,
                      grid_rate=10.0, eval_rate=2.0, sigma=sigma)
-    dim = obj.family.n_coefficients
+    bounds = [(-1.0, 1.0)] * obj.n_base + [(0.0, 1.0)] * obj.n_plan
     generations = 0
     with Progress(maxiter, "optimize", quiet=not progress) as bar:
         def callback(*_args: object, **_kw: object) -> None:
@@ -370,13 +409,11 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
             bar.update(1)
 
         res = scipy.optimize.differential_evolution(
-            obj, [(-1.0, 1.0)] * dim, seed=seed, maxiter=maxiter, popsize=popsize, tol=0.0,
+            obj, bounds, seed=seed, maxiter=maxiter, popsize=popsize, tol=0.0,
             polish=False, vectorized=True, updating="deferred", init="latinhypercube",
             callback=callback)
     fine_t = np.linspace(0.0, duration, int(round(duration / dt)) + 1)
-    fam = FourierFamily(duration, harmonics, fine_t,
-                        float(np.linalg.norm(platform.positions, axis=1).max()),
-                        limits.pivot_rate_max or 1.5)
+    fam = _family(platform, duration, harmonics, fine_t, limits)
     notes: list[str] = []
     why_first = ""
     good: list[tuple[np.ndarray, Trajectory, float, float]] = []
@@ -384,8 +421,12 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     for k in np.argsort(res.population_energies)[:12]:
         coef = res.population[k]
         _, _, s_v = obj.twist(coef[None])
-        tw, _, _ = _scaled_twist(fam, coef[None], limits, floor, fine_t, 0.95, s_v)
-        traj = Trajectory.from_twist(fine_t, tw[0, :, 0], tw[0, :, 1], tw[0, :, 2])
+        tw, _, _ = _scaled_twist(fam, coef[None, :obj.n_base], limits, floor, fine_t, 0.95,
+                                 s_v)
+        legs = obj.planned(fine_t, tw, coef[None])
+        traj = Trajectory.from_twist(fine_t, tw[0, :, 0], tw[0, :, 1], tw[0, :, 2],
+                                     None if legs is None else dict(zip(
+                                         model.planned_columns, legs[0].T, strict=True)))
         ok, why = _verify(traj, platform, limits, floor)
         if ok:
             good.append((coef, traj, float(s_v[0]), float(res.population_energies[k])))
@@ -410,16 +451,19 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
                          "is counted (trajectory check)")
         chosen = good[best]
     coef, traj, s_v, value = chosen
-    model = PlatformModel(platform)
-    if model.planned_columns:  # legs: typical's plan on the chosen base motion (the search
-        traj = with_planned(traj, platform, seed)  # itself holds them)
-        notes.append("the legs' extensions are planned as trajectory typical plans them; the "
-                     "search optimised the base motion with the legs held")
+    if obj.planners:
+        k, plans = obj.n_base, []
+        for unit, d in obj.planners:
+            plans.append(unit.describe_plan(coef[k:k + d]))
+            k += d
+        notes.append("planned with the base motion (on its progress while the base moves): "
+                     + ", ".join(plans))
     cond = conditioning(stacked_regressor(*_variant_prediction(traj, model), model,
                                           friction)[0])
     out = OptimizeResult(traj, objective, value, cond.condition_number, cond.rank,
-                         obj.rank or 0, coef.reshape(3, -1), s_v, obj.evaluations,
-                         generations, time.monotonic() - t_start, notes)
+                         obj.rank or 0, coef[:obj.n_base].reshape(3, -1), s_v,
+                         obj.evaluations, generations, time.monotonic() - t_start, notes,
+                         plan=coef[obj.n_base:].copy())
     if sigma is not None:
         from ropod_sysid.trajectory.precheck import check
 
@@ -447,10 +491,25 @@ def _total_error(traj: Trajectory, platform: Platform, limits: Limits, floor: Fl
     return float(np.mean(np.log(total[ok] / sigma.scale[idx][ok]))) if ok.any() else math.inf
 
 
+def _family(platform: Platform, duration: float, harmonics: int, t: np.ndarray,
+            limits: Limits) -> FourierFamily:
+    """The search's :class:`FourierFamily` on the grid t: curvature below the units' and
+    1 / (R_min / :data:`CURVATURE_MARGIN`) (002 eq. 26)."""
+    r_min = limits.curvature_radius_min
+    return FourierFamily(duration, harmonics, t,
+                         float(np.linalg.norm(platform.positions, axis=1).max()),
+                         limits.pivot_rate_max or 1.5,
+                         radius_min=None if r_min is None else r_min / CURVATURE_MARGIN)
+
+
 def _verify(traj: Trajectory, platform: Platform, limits: Limits,
             floor: Floor) -> tuple[bool, str]:
-    """Limits, floor (four variants) and the integrated turning rates, flags and wheel rates
-    of a run on its own grid."""
+    """Limits, floor (four variants), the curvature radius (002 eq. 26) and the integrated
+    turning rates, flags (a wheel flip with a pivot-rate limit; a wheel at rest, type A,
+    always) and wheel rates of a run on its own grid, with its planned own coordinates."""
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.trajectory.precheck import curvature_report
+
     rates = traj.twist_rates()
     if traj.speed().max() > limits.v_max:
         return False, "speed"
@@ -458,13 +517,25 @@ def _verify(traj: Trajectory, platform: Platform, limits: Limits,
         return False, "acceleration"
     if np.abs(traj.omega).max() > limits.w_max or np.abs(rates[:, 2]).max() > limits.alpha_max:
         return False, "rotation"
+    if limits.curvature_radius_min is not None:
+        curve = curvature_report(traj.t, traj.twist(), platform.positions,
+                                 limits.curvature_radius_min)
+        if not curve.ok:
+            return False, f"curvature radius {curve.min_radius:.3g} m"
     var = variants(traj)
     off = _off_floor(var, floor)
     if off is not None:
         return False, f"floor ({off})"
+    columns = PlatformModel(platform).planned_columns
     if (limits.pivot_rate_max is not None or limits.wheel_rate_max is not None
-            or limits.steer_rate_max is not None):
-        pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]), platform)
+            or limits.steer_rate_max is not None or columns):
+        planned = (np.stack([vt.planned_series(columns) for vt in var.values()])
+                   if columns else None)
+        pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]), platform,
+                              planned=planned)
+        for what, mask in pred.flags.items():  # units without a turning joint: type A
+            if mask[..., ~pred.turning_units].any():
+                return False, what
         peak = pred.turning_peak
         if limits.pivot_rate_max is not None and (peak > limits.pivot_rate_max
                                                   or pred.flagged):

@@ -44,15 +44,20 @@ class FourierFamily:
     direction of P_i, hence the pivot rate, depends on β and κ only, not on the speed scale s_v;
     ρ_β and ρ_κ size the rates of β and of κ's argument to the pivot-rate budget, and β, κ vary
     only where w is near 1 (w² factor), so the units need not turn while the base barely moves.
+    The curvature radius is R = |v|/|ω| = 1/|κ| > 1/κ_max wherever the base moves: with
+    ``radius_min`` (002 eq. 26's R_min) κ_max ≤ 1/R_min, so every member keeps it.
     """
 
     def __init__(self, duration: float, harmonics: int, t: np.ndarray, r_max: float,
-                 rate_budget: float = 1.5, ramp: float | None = None) -> None:
+                 rate_budget: float = 1.5, ramp: float | None = None,
+                 radius_min: float | None = None) -> None:
         self.duration = float(duration)
         self.harmonics = int(harmonics)
         self.t = np.asarray(t, float)
         self.ramp = float(ramp if ramp is not None else min(0.15 * duration, 4.0))
         self.kappa_max = KAPPA_FRACTION / max(float(r_max), 1e-6)
+        if radius_min is not None:  # R = |v|/|ω| = 1/|κ| ≥ radius_min (002 eq. 26)
+            self.kappa_max = min(self.kappa_max, 1.0 / radius_min)
         self.rho_beta = RHO_BETA * rate_budget / math.sqrt(2 * self.harmonics)
         self.rho_kappa = RHO_KAPPA * rate_budget / math.sqrt(2 * self.harmonics)
         wf = 2 * math.pi / self.duration

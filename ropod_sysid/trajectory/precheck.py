@@ -4,11 +4,12 @@ Limits and where they are broken, the floor, the unit angles predicted along all
 by every unit type (:func:`ropod_sysid.trajectory.prediction.predict_angles`): turning rates and
 flags of the types that have them (the swivel: pivot rates of eq. 8a and wheel flips), steering
 rates of the types with an actuated steering (the steered wheel) and the rate of every driven
-wheel; on platforms with constraint rows (steered wheels) the time spent near a singular
-configuration, where the fit leaves out the base rows (:func:`singular_report`); and the
-identifiability the run promises: the condition number and rank of the stacked regressor
-A_ID,ext of the four variants and the predicted standard deviation of every parameter
-(:mod:`ropod_sysid.trajectory.identifiability`).
+wheel; the base's least curvature radius over the moving time (002 eq. 26,
+:func:`curvature_report`); on platforms with constraint rows (steered wheels) the time spent
+near a singular configuration, where the fit leaves out the base rows
+(:func:`singular_report`); and the identifiability the run promises: the condition number and
+rank of the stacked regressor A_ID,ext of the four variants and the predicted standard
+deviation of every parameter (:mod:`ropod_sysid.trajectory.identifiability`).
 """
 
 from __future__ import annotations
@@ -39,7 +40,8 @@ from ropod_sysid.trajectory.setpoints import Trajectory
 
 @dataclass
 class Finding:
-    """A limit, floor or pivot finding: what, where (time range [s], variant) and how much."""
+    """A limit, floor or pivot finding: what, where (time range [s], variant) and how much
+    (``peak``: the largest value, or for a lower bound (``below``) the least)."""
 
     what: str
     limit: float
@@ -47,27 +49,129 @@ class Finding:
     t_start: float
     t_end: float
     variant: str = "all"
+    below: bool = False
 
     def text(self) -> str:
-        return (f"{self.what}: {self.peak:.3g} > {self.limit:.3g} from t={self.t_start:.2f} s "
-                f"to {self.t_end:.2f} s ({self.variant})")
+        return (f"{self.what}: {self.peak:.3g} {'<' if self.below else '>'} {self.limit:.3g} "
+                f"from t={self.t_start:.2f} s to {self.t_end:.2f} s ({self.variant})")
 
 
 def _runs(mask: np.ndarray, t: np.ndarray, values: np.ndarray, what: str, limit: float,
-          variant: str) -> list[Finding]:
-    """Contiguous runs of ``mask`` as findings (peak of ``values`` in each)."""
+          variant: str, below: bool = False) -> list[Finding]:
+    """Contiguous runs of ``mask`` as findings (peak of ``values`` in each; its least value
+    for a lower bound, ``below``)."""
     out = []
     if not np.any(mask):
         return out
     m = np.concatenate([[False], mask, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(m))
+    pick = np.min if below else np.max
     for a, b in zip(edges[::2], edges[1::2], strict=True):
-        out.append(Finding(what, limit, float(np.max(values[a:b])), float(t[a]),
-                           float(t[b - 1]), variant))
+        out.append(Finding(what, limit, float(pick(values[a:b])), float(t[a]),
+                           float(t[b - 1]), variant, below))
     return out
 
 
 MOVING_SPEED = 0.01  # [m/s] the platform moves while a unit's attachment point is this fast
+CURVATURE_FINDING = "curvature radius R [m] (moving)"  # check's finding below R_min
+
+
+def _moving(twists: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(…, N) True where some unit's attachment point (n, 2) moves at least
+    :data:`MOVING_SPEED` with the base twists (…, N, 3)."""
+    u_x = twists[..., :1] - twists[..., 2:] * positions[:, 1]
+    u_y = twists[..., 1:2] + twists[..., 2:] * positions[:, 0]
+    return (np.hypot(u_x, u_y) >= MOVING_SPEED).any(axis=-1)
+
+
+def curvature_radius(twists: np.ndarray) -> np.ndarray:
+    """R = |(vx, vy)| / |ω| (…, N) [m] of base-frame twists (…, N, 3): the distance of the
+    instantaneous centre of rotation from the base origin (002 eq. 26); inf where ω = 0, 0 in
+    a rotation in place."""
+    tw = np.asarray(twists, float)
+    w = np.abs(tw[..., 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(w > 0, np.hypot(tw[..., 0], tw[..., 1]) / np.where(w > 0, w, 1.0),
+                        np.inf)
+
+
+@dataclass
+class CurvatureReport:
+    """The base's curvature radius R = |(vx, vy)| / |ω| over a run's moving time (some unit's
+    attachment point at least ``moving_speed`` fast; the four variants share R): its least
+    value ``min_radius`` [m] (inf: the base never rotates while moving) at ``t_min`` [s], and
+    with a limit ``limit`` (002 eq. 26's R_min) the ``moving_fraction`` of the moving time and
+    the ``longest`` stretch [s] below it (0 without a limit)."""
+
+    limit: float | None
+    moving_speed: float
+    min_radius: float
+    t_min: float
+    moving_fraction: float
+    longest: float
+
+    @property
+    def ok(self) -> bool:
+        return self.limit is None or self.moving_fraction == 0.0
+
+    def to_dict(self) -> dict[str, object]:
+        def num(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+
+        return {"limit": self.limit, "moving_speed": self.moving_speed,
+                "min_radius": num(self.min_radius), "t_min": num(self.t_min),
+                "moving_fraction": self.moving_fraction, "longest": self.longest,
+                "ok": self.ok}
+
+    def text(self) -> list[str]:
+        lim = "none" if self.limit is None else f"{self.limit:.3g} m"
+        least = (f"{self.min_radius:.3f} m at t={self.t_min:.2f} s"
+                 if math.isfinite(self.min_radius) else "inf (no rotation while moving)")
+        out = [f"curvature radius R = |v|/|ω| while moving (002 eq. 26, limit R_min {lim}): "
+               f"least {least}"]
+        if self.limit is not None:
+            out.append(f"  below R_min: {100 * self.moving_fraction:.1f} % of the moving time, "
+                       f"longest {self.longest:.2f} s"
+                       + ("" if self.ok else " (the centre of rotation comes inside the "
+                          "footprint: a rotation in place or a tight turn)"))
+        return out
+
+
+def curvature_report(t: np.ndarray, twist: np.ndarray, positions: np.ndarray,
+                     limit: float | None) -> CurvatureReport:
+    """The :class:`CurvatureReport` of a run: base-frame twists (N, 3) at times t (N,), the
+    units' attachment points (n, 2) [m] (what moves) and the least radius ``limit`` [m] or
+    None. Vectorised over samples."""
+    radius = curvature_radius(twist)
+    moving = _moving(twist, positions)
+    w = np.gradient(t) if t.size > 1 else np.ones(1)
+    if moving.any():
+        r_mov = np.where(moving, radius, np.inf)
+        k = int(np.argmin(r_mov))
+        least = float(r_mov[k])
+        t_min = float(t[k]) if math.isfinite(least) else math.nan
+    else:
+        least, t_min = math.inf, math.nan
+    frac = longest = 0.0
+    if limit is not None and moving.any():
+        below = moving & (radius < limit * (1 - 1e-9))
+        frac = float(below @ w / (moving @ w))
+        cum = np.concatenate([[0.0], np.cumsum(w)])
+        edge = np.diff(np.concatenate([[0], below.astype(np.int8), [0]]))
+        on, off = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+        longest = float((cum[off] - cum[on]).max(initial=0.0))
+    return CurvatureReport(limit, MOVING_SPEED, least, t_min, frac, longest)
+
+
+def _curvature_findings(t: np.ndarray, twist: np.ndarray, positions: np.ndarray,
+                        limit: float | None) -> list[Finding]:
+    """Stretches of the moving time whose curvature radius is below ``limit`` (all four
+    variants: they share R)."""
+    if limit is None:
+        return []
+    radius = curvature_radius(twist)
+    below = _moving(twist, positions) & (radius < limit * (1 - 1e-9))
+    return _runs(below, t, radius, CURVATURE_FINDING, limit, "all", below=True)
 
 
 @dataclass
@@ -138,10 +242,7 @@ def singular_report(t: np.ndarray, twists: np.ndarray, pred: Prediction, model: 
                      pred.angles.reshape(n_var * n, -1), pred.rates.reshape(n_var * n, -1))
     ratio = model.singular_ratio(st).reshape(n_var, n)  # type: ignore[attr-defined]
     near = ratio < SINGULAR_MARGIN
-    pos = model.platform.positions  # type: ignore[attr-defined]
-    u_x = twists[..., :1] - twists[..., 2:] * pos[:, 1]  # (4, N, n) attachment points
-    u_y = twists[..., 1:2] + twists[..., 2:] * pos[:, 0]
-    moving = (np.hypot(u_x, u_y) >= MOVING_SPEED).any(axis=-1)
+    moving = _moving(twists, model.platform.positions)  # type: ignore[attr-defined]
     w = np.gradient(t) if n > 1 else np.ones(1)  # the time each sample stands for [s]
     frac = (near * w).sum(axis=1) / w.sum()
     mov_time = (moving * w).sum(axis=1)
@@ -202,6 +303,8 @@ class CheckReport:
         without an actuated steering); steer_peak_time (4, n) [s]
     singular : time near singular configurations (:class:`SingularReport`), None without
         constraint rows
+    curvature : the base's curvature radius over the moving time (:class:`CurvatureReport`,
+        against ``limits.curvature_radius_min``)
     """
 
     duration: float
@@ -232,6 +335,7 @@ class CheckReport:
     steer_peak_time: np.ndarray = field(default_factory=lambda: np.zeros((4, 0)))
     singular: SingularReport | None = None
     combinations: dict[str, str] = field(default_factory=dict)  # as the fit will name them
+    curvature: CurvatureReport | None = None
 
     @property
     def turning(self) -> list[int]:
@@ -268,7 +372,8 @@ class CheckReport:
                        "w_max": self.limits.w_max, "alpha_max": self.limits.alpha_max,
                        "pivot_rate_max": self.limits.pivot_rate_max,
                        "wheel_rate_max": self.limits.wheel_rate_max,
-                       "steer_rate_max": self.limits.steer_rate_max},
+                       "steer_rate_max": self.limits.steer_rate_max,
+                       "curvature_radius_min": self.limits.curvature_radius_min},
             "floor": list(self.floor),
             "peaks": {k: num(v) for k, v in self.peaks.items()},
             "ok": self.ok,
@@ -283,6 +388,7 @@ class CheckReport:
                                    for j in self.steered}
                                for i, v in enumerate(VARIANTS)},
             "singular": None if self.singular is None else self.singular.to_dict(),
+            "curvature": None if self.curvature is None else self.curvature.to_dict(),
             "extent": {v: [float(e) for e in self.extent[i]] for i, v in enumerate(VARIANTS)},
             "friction": self.friction,
             "rank": self.rank, "parameters": len(self.names),
@@ -342,6 +448,9 @@ class CheckReport:
         out.append(f"{'floor y [' + f'{y0:g}, {y1:g}' + '] m':<36}{ext[:, 2].min():>10.2f}"
                    f"{ext[:, 3].max():>10.2f}  {'ok' if inside else 'LEFT'}")
         out.append("")
+        if self.curvature is not None and self.limits.curvature_radius_min is not None:
+            out += self.curvature.text()
+            out.append("")
         for units, peak, when, title in (
                 (self.turning, self.pivot_peak, self.pivot_peak_time,
                  "max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):"),
@@ -471,6 +580,11 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
               ("rotational acceleration |ω̇| [rad/s²]", alpha, limits.alpha_max)]
     for what, values, limit in checks:
         findings += _runs(values > limit * (1 + 1e-9), traj.t, values, what, limit, "all")
+    # the curvature radius (002 eq. 26): the same for all variants
+    findings += _curvature_findings(traj.t, traj.twist(), platform.positions,
+                                    limits.curvature_radius_min)
+    curvature = curvature_report(traj.t, traj.twist(), platform.positions,
+                                 limits.curvature_radius_min)
     # floor, per variant (the planned path)
     extent = np.zeros((4, 4))
     for i, (name, vt) in enumerate(var.items()):
@@ -519,7 +633,8 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
                        [c for c, w in zip(platform.layout.current_names, pred.wheel_actuators,
                                           strict=True) if w],
                        sensors, s_hat, bias, steer_peak, steer_peak_time, singular,
-                       dict(predicted_solution(a, true_values, names).combinations))
+                       dict(predicted_solution(a, true_values, names).combinations),
+                       curvature)
 
 
 def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,

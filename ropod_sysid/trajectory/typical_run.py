@@ -8,7 +8,9 @@ predicted by their type (eq. 8a) checked for all four variants; platforms withou
 (omni wheels) skip these steps. Units with an actuated steering (steered wheels) get blends slow
 enough for the steering-rate limit, and on platforms whose constraint rows lose rank in some
 manoeuvre (two steered wheels: a rotation in place, a sideways crab) that manoeuvre is left out
-or turned. With a wheel-rate limit the driven wheels' rates are checked too.
+or turned. With a wheel-rate limit the driven wheels' rates are checked too. With a least
+curvature radius (002 eq. 26; the default for platforms with legs) the corners are at least that
+wide and the start's rotation is about a point that far beside the base (no rotation in place).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
+from ropod_sysid.trajectory.precheck import curvature_report
 from ropod_sysid.trajectory.prediction import predict_angles, steering_points, trailing_points
 from ropod_sysid.trajectory.run_variants import _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
@@ -40,6 +43,7 @@ from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
 TYPICAL_MAX_DURATION = 3600.0  # typical(): the longest run [s] (an hour of driving)
 SPIN_START_MIN = 30.0  # typical(): runs this long [s] or longer start with a rotation in place
 DESIGN_MARGIN = 0.9  # typical(): every limit is planned at 90 % of its value
+ATTEMPTS = 16  # typical(): plans tried, each slower or with longer blends than the one before
 
 
 @dataclass
@@ -55,6 +59,7 @@ class _Design:
     spin: bool = True  # long runs start with a rotation in place
     spin_offset: float = 0.0  # … about a point this far to the right of the base origin [m]
     side: tuple[float, float] = (0.0, 1.0)  # crab lobes' short sides: direction (base frame)
+    v_turn: float | None = None  # speed in the drive lobes' corners [m/s] (None: v_corner)
 
 
 # lobe kinds of the typical run, in order: corners with a rotation in place, crab (lateral)
@@ -75,7 +80,8 @@ def _lobe(plan: _Plan, kind: str, size: tuple[float, float], design: _Design, mi
     """
     sgn = -1.0 if mirror else 1.0
     cruise = np.array([design.v, 0.0, 0.0])
-    slow = np.array([design.v_corner, 0.0, 0.0])
+    v_slow = design.v_turn if kind == "drive" and design.v_turn else design.v_corner
+    slow = np.array([v_slow, 0.0, 0.0])
     e, c = size
     if first:
         plan.to(cruise)
@@ -89,7 +95,7 @@ def _lobe(plan: _Plan, kind: str, size: tuple[float, float], design: _Design, mi
         k_x = plan.hold(0.0)
         plan.to(slow)
         plan.corner(sgn * math.pi / 2, design.w_corner)
-        plan.hold(c / design.v_corner)
+        plan.hold(c / v_slow)
         plan.corner(sgn * math.pi / 2, design.w_corner)
         groups = [[k_x], [k_y]]
     else:
@@ -281,7 +287,8 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             dt: float = 0.005, seed: int = 0, pivot_rate_max: float | None = 1.5,
             platform: Platform | None = None,
             wheel_rate_max: float | None = None,
-            steer_rate_max: float | None = STEER_RATE_MAX) -> Trajectory:
+            steer_rate_max: float | None = STEER_RATE_MAX,
+            curvature_radius_min: float | None = None) -> Trajectory:
     """A "typical" identification run (thesis Sec. VI-A), from rest to rest.
 
     The run is a chain of loops ("lobes") through the start, each leaving and reaching it along
@@ -348,6 +355,11 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     steer_rate_max : steering-rate limit of units with an actuated steering [rad/s] (default
         :data:`~ropod_sysid.trajectory.limits.STEER_RATE_MAX`, 001's 195.95 °/s); None to
         not plan for it
+    curvature_radius_min : least curvature radius R = |v|/|ω| of the base wherever it rotates
+        [m] (002 eq. 26; :func:`~ropod_sysid.trajectory.limits.default_curvature_radius`
+        gives a platform's default); None (default): no limit. With it the start's whole
+        rotation is a circle about a point at least R_min / 0.9 beside the base origin (no
+        rotation in place, R = 0) and every corner is at least that wide.
 
     Returns
     -------
@@ -355,7 +367,7 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
         Setpoints at ``dt`` and the planned pose.
     """
     limits = Limits(v_max, a_max, w_max, alpha_max, pivot_rate_max, wheel_rate_max,
-                    steer_rate_max)
+                    steer_rate_max, curvature_radius_min)
     floor = _check_floor(floor)
     if not (isinstance(duration, int | float) and 0 < duration <= TYPICAL_MAX_DURATION):
         raise InputError(f"duration must be a number of seconds in (0, "
@@ -379,27 +391,44 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
     shrink = 0.97
     speed = 1.0
     slower = 1.0  # speeds and rotation rates scaled down for the wheel-rate limit
+    wider = 1.0  # the least planned curvature radius scaled up for its limit
+    turn = 1.0  # the speed in the corners scaled down for the floor (with R_min)
     last_error = ""
-    for _attempt in range(10):
+    for _attempt in range(ATTEMPTS):
         caps = limits.scaled(DESIGN_MARGIN, pivot_margin, steer_margin)
         if slower != 1.0:
             caps = Limits(caps.v_max * slower, caps.a_max, caps.w_max * slower, caps.alpha_max,
-                          caps.pivot_rate_max, None, caps.steer_rate_max)
+                          caps.pivot_rate_max, None, caps.steer_rate_max,
+                          caps.curvature_radius_min)
         vm = v_max * slower
         v = min(0.8 * jitter, 0.85) * vm * speed
         v_corner = min(0.4 * vm * jitter, 0.9 * caps.a_max / (0.9 * caps.w_max)) * speed
+        w_corner = min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner)
+        w_spin, offset, v_turn = 0.9 * caps.w_max, spin_offset, None
+        if caps.curvature_radius_min is not None:
+            # 002 eq. 26: R = |v|/|ω| ≥ R_min in corners and in the start's rotation, which
+            # turns about a point R_min / 0.9 (or farther) beside the base origin; corners of
+            # radius R_min / 0.9 as fast as the corner rate allows, up to cruise speed
+            r_plan = caps.curvature_radius_min * wider
+            v_turn = max(v_corner, min(v, w_corner * r_plan)) * turn
+            w_corner = min(w_corner, v_turn / r_plan, 0.9 * caps.a_max / v_turn)
+            if offset is not None:
+                offset = max(offset, r_plan)
+                w_spin = min(w_spin, v / offset, math.sqrt(0.9 * caps.a_max / offset))
         design = _Design(
             v=v, v_corner=v_corner, v_spin=0.2 * vm * speed,
-            w_corner=min(0.9 * caps.w_max, 0.9 * caps.a_max / v_corner),
-            w_spin=0.9 * caps.w_max, pause=1.0, spin=spin_offset is not None,
-            spin_offset=spin_offset or 0.0, side=side)
+            w_corner=w_corner, w_spin=w_spin, pause=1.0, spin=offset is not None,
+            spin_offset=offset or 0.0, side=side, v_turn=v_turn)
         try:
             segs = _typical_program(duration, caps, floor, pivots, design, order, shrink,
                                     steering)
         except PlanningError as exc:
             if "duration" in str(exc):
                 raise
-            speed *= 0.85  # smaller corners
+            if v_turn is not None and turn > 0.3:
+                turn *= 0.8  # corners of R_min / 0.9 taken slower: shorter rate blends
+            else:
+                speed *= 0.85  # smaller corners
             last_error = str(exc)
             continue
         n = int(round(duration / dt))
@@ -414,6 +443,14 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
             shrink *= 0.93
             last_error = "the planned run leaves the floor"
             continue
+        if curvature_radius_min is not None:
+            curve = curvature_report(traj.t, traj.twist(), platform.positions,
+                                     curvature_radius_min)
+            if not curve.ok:
+                wider *= 1.15
+                last_error = (f"curvature radius {curve.min_radius:.3g} m below "
+                              f"{curvature_radius_min:g} m")
+                continue
         if pivots is not None or steering is not None or wheel_rate_max is not None:
             columns = PlatformModel(platform).planned_columns if platform else []
             pred = predict_angles(traj.t, np.stack([vt.twist() for vt in var.values()]),
@@ -435,8 +472,11 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
                 last_error = f"predicted wheel rate {wheel:.3g} rad/s exceeds the limit"
                 continue
         return traj
+    hint = ("" if curvature_radius_min is None else
+            f" (--curvature-radius-min {curvature_radius_min:g} m makes every corner and the "
+            f"start's rotation at least {curvature_radius_min / DESIGN_MARGIN:.3g} m wide)")
     raise PlanningError(f"cannot plan a typical run within the limits: {last_error}; relax "
-                        "the limits, enlarge the floor or use no pivot-rate limit")
+                        f"the limits{hint}, enlarge the floor or use no pivot-rate limit")
 
 
 SIDE_DIRECTIONS = (90.0, 75.0, 60.0, 45.0)  # typical(): crab sides tried [°], the first clear

@@ -84,6 +84,8 @@ LEG_START_SPEED = 0.05  # [m/s]: planned legs move only while the base is faster
 LEG_SPEED_RATIO = 3.0  # planned leg rates stay below the base's speed at the leg / this
 REST_SPEED = 0.01  # [m/s]: a wheel centre slower than this while the base moves is at rest
 TYPE_A = "wheel at rest (type A)"  # the prediction's flag (002 §III-C)
+LEG_AMPLITUDE = 0.45  # plan_search(): the largest amplitude, a fraction of the range's width
+LEG_FREQUENCY_MAX = 0.3  # [Hz] plan_search(): the fastest leg oscillation
 
 
 @dataclass
@@ -157,6 +159,7 @@ class LeggedUnits:
     steering: ClassVar[str | None]
     steering_current: ClassVar[int]
     planned_channels: ClassVar[tuple[Channel, ...]] = (LEG_CHANNEL,)  # a run plans λ
+    plan_dimensions: ClassVar[int] = 3  # plan_search(): amplitude, frequency, phase
     leg_parameters: ClassVar[dict[str, tuple[str, str]]] = {
         "m_leg": ("kg", "mass moving with a leg's attachment point"),
         "flv": ("N s/m", "viscous leg friction"),
@@ -225,6 +228,13 @@ class LeggedUnits:
 
     def torque_constants(self) -> np.ndarray:
         return self.wheel.torque_constants()
+
+    @property
+    def reach(self) -> float:
+        """The farthest the attachment point comes from the base origin over the leg's range
+        [m] (|h + λ a| is convex in λ: at an end of the range); planning keeps the centre of
+        rotation beyond it (002 eq. 26)."""
+        return float(np.linalg.norm(self.leg.point(np.asarray(self.leg.range)), axis=-1).max())
 
     def initial_angles(self, twist: np.ndarray) -> np.ndarray:
         """The wheel's, with the leg at the middle of its range (the wheel as if attached
@@ -452,33 +462,68 @@ class LeggedUnits:
     def plan_coordinates(self, t: np.ndarray, twists: np.ndarray, seed: int = 0,
                          rate_max: float = LEG_RATE_MAX) -> dict[str, np.ndarray]:
         """A planned extension for an identification run along base-frame twists (N, 3) at
-        times t (N,) [s]: λ = middle + A sin(2π f s + φ), A = 40 % of the range's width, a
-        frequency and phase of its own per unit (so that the legs' masses and frictions
-        separate), on a progress s that advances only while the base moves: ṡ = a minimum-jerk
-        step of (speed − :data:`LEG_START_SPEED`) / (:data:`LEG_SPEED_RATIO` · A 2π f)
-        clipped to [0, 1], the speed that of the base's motion at the leg's middle point
-        (|v + ω × P|, the slower of the run and its mirrored variant). So the leg moves slower
-        than that speed / LEG_SPEED_RATIO, no wheel comes to rest where the base moves it
-        (002 §III-C, type A: up to the leg's excursion from its middle point), the legs stand
-        still while the base is slow there, and λ stays within its range; the rate is at most
-        ``rate_max`` [m/s]."""
+        times t (N,) [s] (``trajectory typical``'s): :meth:`leg_profile` with A = 40 % of the
+        range's width and a frequency f and phase of its own per unit (so that the legs'
+        masses and frictions separate), A 2π f ≤ 0.8 ``rate_max`` [m/s]."""
         t = np.asarray(t, float)
-        tw = np.asarray(twists, float).reshape(t.size, 3)
+        tw = np.asarray(twists, float).reshape(1, t.size, 3)
         amp = 0.4 * (self.leg.range[1] - self.leg.range[0])
         rng = np.random.default_rng([zlib.crc32(self.spec.name.encode()), seed])
         freq = 0.8 * rate_max / (2 * np.pi * amp) * rng.uniform(0.6, 1.0)
         phase = rng.uniform(0, 2 * np.pi)
+        lam = self.leg_profile(t, tw, np.array([amp]), np.array([freq]), np.array([phase]))
+        return {LEG_CHANNEL.column(self.spec.name): lam[0]}
+
+    def leg_profile(self, t: np.ndarray, twists: np.ndarray, amplitude: np.ndarray,
+                    freq: np.ndarray, phase: np.ndarray) -> np.ndarray:
+        """Planned extensions (S, N) [m] along base-frame twists (S, N, 3) at times t (N,) for
+        S profiles λ = middle + A sin(2π f s + φ) (amplitudes A [m], frequencies f [Hz],
+        phases φ [rad], each (S,)) on a progress s that advances only while the base moves:
+        ṡ = a minimum-jerk step of (speed − :data:`LEG_START_SPEED`) / (:data:`LEG_SPEED_RATIO`
+        · A 2π f) clipped to [0, 1], the speed that of the base's motion at the leg's middle
+        point (|v + ω × P|, the slower of the run and its mirrored variant). So the leg moves
+        at most A 2π f and slower than that speed / LEG_SPEED_RATIO, no wheel comes to rest
+        where the base moves it (002 §III-C, type A: up to the leg's excursion from its middle
+        point), the legs stand still while the base is slow there, and λ stays within
+        middle ± A."""
+        t = np.asarray(t, float)
+        tw = np.asarray(twists, float)
+        amp, freq, phase = (np.asarray(v, float)[:, None] for v in (amplitude, freq, phase))
         px, py = self.leg.point(self.leg.middle)
         # the base's velocity at the leg's middle point, the slower of a run and its mirror
         # (v_y, ω → −v_y, −ω; the negated variants are as fast): its four variants share the plan
-        speed = np.minimum(np.hypot(tw[:, 0] - tw[:, 2] * py, tw[:, 1] + tw[:, 2] * px),
-                           np.hypot(tw[:, 0] + tw[:, 2] * py, -tw[:, 1] - tw[:, 2] * px))
+        vx, vy, w = tw[..., 0], tw[..., 1], tw[..., 2]
+        speed = np.minimum(np.hypot(vx - w * py, vy + w * px), np.hypot(vx + w * py, -vy - w * px))
         x = np.clip((speed - LEG_START_SPEED) / (LEG_SPEED_RATIO * amp * 2 * np.pi * freq),
                     0.0, 1.0)
         gate = x**3 * (10.0 - 15.0 * x + 6.0 * x * x)  # minimum-jerk: smooth on and off
-        progress = integrated(t, gate[None, :, None], np.zeros((1, 1)))[0, :, 0]
-        lam = self.leg.middle + amp * np.sin(2 * np.pi * freq * progress + phase)
+        progress = integrated(t, gate[..., None], np.zeros((gate.shape[0], 1)))[..., 0]
+        return self.leg.middle + amp * np.sin(2 * np.pi * freq * progress + phase)
+
+    def plan_search(self, t: np.ndarray, twists: np.ndarray, u: np.ndarray,
+                    rate_max: float = LEG_RATE_MAX) -> dict[str, np.ndarray]:
+        """Planned extensions (S, N) for ``trajectory optimize``'s search: :meth:`leg_profile`
+        chosen by :attr:`plan_dimensions` = 3 numbers in [0, 1] per candidate, u (S, 3):
+        amplitude A = (0.1 + 0.9 u₀) · :data:`LEG_AMPLITUDE` × the range's width, frequency
+        f = (0.2 + 0.8 u₁) × the least of 0.8 ``rate_max`` / (2π A) (the rate limit) and
+        :data:`LEG_FREQUENCY_MAX`, phase 2π u₂; along base-frame twists (S, N, 3)."""
+        amp, freq, phase = self._searched(u, rate_max)
+        lam = self.leg_profile(t, twists, amp, freq, phase)
         return {LEG_CHANNEL.column(self.spec.name): lam}
+
+    def _searched(self, u: np.ndarray, rate_max: float = LEG_RATE_MAX
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Amplitude [m], frequency [Hz] and phase [rad] (S,) of :meth:`plan_search`'s u."""
+        u = np.clip(np.asarray(u, float).reshape(-1, self.plan_dimensions), 0.0, 1.0)
+        amp = (0.1 + 0.9 * u[:, 0]) * LEG_AMPLITUDE * (self.leg.range[1] - self.leg.range[0])
+        f_max = np.minimum(0.8 * rate_max / (2 * np.pi * amp), LEG_FREQUENCY_MAX)
+        return amp, (0.2 + 0.8 * u[:, 1]) * f_max, 2 * np.pi * u[:, 2]
+
+    def describe_plan(self, u: np.ndarray) -> str:
+        """:meth:`plan_search`'s plan of u (3,) in words."""
+        amp, freq, _ = self._searched(u)
+        return (f"leg {self.spec.name} ±{1000 * amp[0]:.0f} mm about {self.leg.middle:.3g} m "
+                f"at {freq[0]:.3g} Hz")
 
     def _leg_series(self, t: np.ndarray, tw: np.ndarray, legs: np.ndarray | None
                     ) -> np.ndarray:
