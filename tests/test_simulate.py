@@ -11,7 +11,6 @@ from ropod_sysid.params import thesis_fixed_masses
 from ropod_sysid.platform import ropod_platform
 from ropod_sysid.signals import central_difference
 from ropod_sysid.simulate import Controller, ForceSchedule, Sensors, Setpoints, record, simulate
-from tests.conftest import smooth_setpoints
 from tests.swivel_arrays import D, P, angles_of
 
 
@@ -114,16 +113,17 @@ def test_sensor_effects(run):
 def test_current_average_is_the_mean_over_the_log_interval(off_square, truth) -> None:
     """``Sensors(current_average=True)`` logs each current as the mean of the torques held over
     the control steps of the log interval centred on its sample (ten 1 ms steps at 100 Hz:
-    exactly centred; fewer at the ends), the default its value at the sample instant — both
-    checked against a 1 kHz log of the same run, and the two differ (the speed loops' torques
-    change within a log interval)."""
-    run = smooth_setpoints(1.0, 1, 1)
+    exactly centred; fewer at the ends), while the run's ``tau`` keeps the torque at the
+    sample instant (the default log's point sample) — both checked against a 1 kHz log of the
+    same run, and the two differ (the speed loops' torques change within a log interval)."""
+    t = np.arange(0.0, 0.41, 0.01)
+    run = Setpoints(t, 0.8 * t, 0.3 * t, 1.0 * t)  # speeding up from rest in every direction
     k_t = off_square.torque_constants()
     fine = simulate(off_square, truth, run, rate=1000.0, engine="numpy")[0]
-    point, mean = (simulate(off_square, truth, run, rate=100.0, engine="numpy",
-                            sensors=Sensors(current_average=avg))[0] for avg in (False, True))
+    mean = simulate(off_square, truth, run, rate=100.0, engine="numpy",
+                    sensors=Sensors(current_average=True))[0]
     expect = np.array([fine.tau[max(10 * k - 5, 0):10 * k + 5].mean(axis=0)
                        for k in range(mean.log.t.size)])
     np.testing.assert_allclose(mean.log.currents, expect / k_t, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(point.log.currents, fine.tau[::10] / k_t, rtol=0, atol=1e-12)
-    assert np.abs(mean.log.currents - point.log.currents).max() > 1e-4
+    np.testing.assert_allclose(mean.tau, fine.tau[::10], rtol=0, atol=1e-12)
+    assert np.abs(mean.tau_mean - mean.tau).max() > 1e-4 * np.abs(mean.tau).max()

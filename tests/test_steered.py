@@ -560,15 +560,14 @@ def test_four_wheels_exact_logs_determine_every_combination_within_one_percent(
             assert abs(value - expect[name]) < tol * scale[name], (name, value, expect[name])
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_four_wheels_noisy_logs_are_covered_by_sigma(four_sample, seed: int) -> None:
+def test_four_wheels_noisy_logs_are_covered_by_sigma(four_sample) -> None:
     """The same logs as 2¹⁴-count encoders and 30 mA current noise record them: every value
     the plain fit determines within 3σ of the truth's combination (over seeds 1–6 the largest
     is J_zz,b's, 2.2–2.9σ: the encoders' bias, −1.7 to −2.0 %; ``--encoder-counts``
-    over-corrects m_b on these logs, up to 5.8σ)."""
+    over-corrects m_b on these logs, up to 5.8σ); seed 2 here."""
     pf, truth, logs = four_sample
     sensors = Sensors(encoder_counts=2**14, current_noise=0.03)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(2)
     noisy = [sensed(log, pf, sensors, rng) for log in logs]
     sol = fit_logs(noisy, pf).solution
     expect, _ = compared(sol, truth, four_wheel_null_space(list(sol.names)))
