@@ -574,7 +574,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
             enc = platform.layout.encoders
             note = counts_note(log.source, detect_encoder_counts(
                 log.angles[:, enc], np.asarray(platform.layout.wrapped)[enc]),
-                options.encoder_counts, isinstance(delay, DelayBracket))
+                options.encoder_counts, isinstance(delay, DelayBracket), model.constrained)
             out.append((log.source, triangles(model, pre, options.friction,
                                               encoder_counts=options.encoder_counts),
                         pre.notes + ([note] if note else []), None))

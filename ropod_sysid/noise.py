@@ -437,18 +437,23 @@ def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None)
 
 
 def counts_note(source: str, detected: int | None, given: int | None,
-                delay_search: bool = False) -> str | None:
+                delay_search: bool = False, constrained: bool = False) -> str | None:
     """The note on a log whose angles move by whole counts of its encoders
     (:func:`detect_encoder_counts`) when the fit was not told them, or was told others.
     ``delay_search``: the fit searches the input delay (``--input-delay auto``), whose
-    criterion the same errors bias (docs/method.md)."""
+    criterion the same errors bias (docs/method.md). ``constrained``: a platform whose
+    constraint forces the fit projects out (steered wheels, legs), where the correction was
+    measured to over-correct on three of four simulated platforms (README)."""
     if detected is None or detected == given:
         return None
     if given is None:
         delay = ("; and they move the delay --input-delay auto finds later (the residual of "
                  "the uncorrected fit is least there)") if delay_search else ""
+        check = ("; on a platform with steered wheels or legs it can over-correct: compare "
+                 "the two fits") if constrained else ""
         return (f"{source}: the angles move by whole counts of 2π/{detected}; give "
                 f"--encoder-counts {detected} to correct the fit for the encoders' "
-                f"quantisation (its errors in the accelerations shrink the values{delay})")
+                f"quantisation (its errors in the accelerations shrink the values{delay})"
+                f"{check}")
     return (f"{source}: the angles move by whole counts of 2π/{detected}, not of the "
             f"--encoder-counts {given} given; check the encoders' resolution")

@@ -383,7 +383,8 @@ class _Run:
             enc = log.layout.encoders
             note = counts_note(self.name, detect_encoder_counts(
                 log.angles[:, enc], np.asarray(log.layout.wrapped)[enc]),
-                self.blocks.encoder_counts, self.blocks.bracket is not None)
+                self.blocks.encoder_counts, self.blocks.bracket is not None,
+                self.blocks.model.constrained)
             if note is not None:
                 self.notes.append(note)
         self.raw += log.n_samples
