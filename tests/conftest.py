@@ -2,17 +2,31 @@
 
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ropod_sysid.params import thesis_fixed_masses
-from ropod_sysid.platform import Platform, ropod_platform
+from ropod_sysid.io import Log, read_log
+from ropod_sysid.params import Parameters, thesis_fixed_masses
+from ropod_sysid.platform import Platform, load_platform, ropod_platform
 from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
 
 if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already: reports
     os.environ.setdefault("ROPOD_SYSID_DRAWERS", "1")  # draw in-process (Painter(2) is tested)
+
+DATASETS = Path(__file__).resolve().parent.parent / "datasets"
+
+
+def shipped(name: str) -> tuple[Platform, Parameters, list[Log]]:
+    """A shipped dataset ``datasets/<name>``: its platform, truth and logs (in name order)."""
+    folder = DATASETS / name
+    platform = load_platform(folder / "platform.yaml")
+    truth = Parameters(json.loads((folder / "truth.json").read_text()))
+    return platform, truth, [read_log(p, platform) for p in sorted(folder.glob("*.csv.gz"))]
+
 
 # attachment points moved off the symmetric square by 1–3 cm (thesis Sec. VI-C)
 OFF_SQUARE = np.array([[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]])

@@ -23,6 +23,7 @@ from ropod_sysid.simulate import Sensors, derivatives, rk4_step, sensed
 from ropod_sysid.trajectory import Trajectory, check, read_trajectory_csv, typical
 from ropod_sysid.trajectory.limits import Limits, default_curvature_radius
 from ropod_sysid.trajectory.prediction import predict_angles
+from tests.conftest import shipped
 from tests.test_steered import advanced
 
 R = 0.1
@@ -582,15 +583,10 @@ def test_the_sigma_objective_weighs_the_legs_motion() -> None:
     assert abs(values["m_b"][0] - values["m_b"][1]) < 0.2
 
 
-LEGS_EXACT = Path(__file__).resolve().parent.parent / "datasets" / "legs-exact"
-
-
 @pytest.fixture(scope="module")
 def legs_exact() -> tuple:
     """The shipped exact logs of the Justin-like base (legs moving): platform, truth, logs."""
-    platform = load_platform(LEGS_EXACT / "platform.yaml")
-    truth = Parameters(json.loads((LEGS_EXACT / "truth.json").read_text()))
-    return platform, truth, [read_log(p, platform) for p in sorted(LEGS_EXACT.glob("*.csv.gz"))]
+    return shipped("legs-exact")
 
 
 def truth_of(sol, truth: Parameters) -> dict[str, float]:

@@ -20,9 +20,10 @@ from ropod_sysid.io import read_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.assembly import null_projector
 from ropod_sysid.params import Parameters, typical_parameters
-from ropod_sysid.platform import load_platform, platform_from_dict
+from ropod_sysid.platform import platform_from_dict
 from ropod_sysid.regressor import Span
 from ropod_sysid.simulate import Controller, Sensors, Setpoints, sensed, simulate
+from tests.conftest import shipped
 
 R = 0.1
 ENTRY = {"name": "jku", "wheel_radius": R, "torque_constant": 2.0,
@@ -490,16 +491,11 @@ def test_four_wheel_and_mixed_platforms_recover_the_inertial_combinations(layout
     assert value["Jst"] == pytest.approx(expect["Jst"], rel=0.10)
 
 
-FOUR_SAMPLE = Path(__file__).resolve().parent.parent / "datasets" / "steered-four"
-
-
 @pytest.fixture(scope="module")
 def four_sample() -> tuple:
     """The shipped exact logs of four steered wheels at a rectangle's corners: platform, truth,
     logs."""
-    pf = load_platform(FOUR_SAMPLE / "platform.yaml")
-    truth = Parameters(json.loads((FOUR_SAMPLE / "truth.json").read_text()))
-    return pf, truth, [read_log(p, pf) for p in sorted(FOUR_SAMPLE.glob("*.csv.gz"))]
+    return shipped("steered-four")
 
 
 def four_wheel_null_space(names: list[str]) -> np.ndarray:
@@ -581,16 +577,11 @@ def test_four_wheels_noisy_logs_are_covered_by_sigma(four_sample) -> None:
             assert abs(value - expect[name]) < 3 * std, (name, value, expect[name], std)
 
 
-MIXED_SAMPLE = Path(__file__).resolve().parent.parent / "datasets" / "steered-swivel"
-
-
 @pytest.fixture(scope="module")
 def mixed_sample() -> tuple:
     """The shipped exact logs of two steered wheels and two swivel casters: platform, truth,
     logs."""
-    pf = load_platform(MIXED_SAMPLE / "platform.yaml")
-    truth = Parameters(json.loads((MIXED_SAMPLE / "truth.json").read_text()))
-    return pf, truth, [read_log(p, pf) for p in sorted(MIXED_SAMPLE.glob("*.csv.gz"))]
+    return shipped("steered-swivel")
 
 
 def test_mixed_exact_logs_determine_every_combination_within_one_percent(mixed_sample) -> None:
