@@ -113,7 +113,7 @@ def _curvature_note(traj: Any, platform: Platform | None, limits: Any) -> str | 
     if limits.curvature_radius_min is None:
         return None
     from ropod_sysid.platform import ropod_platform
-    from ropod_sysid.trajectory.precheck import curvature_report
+    from ropod_sysid.trajectory.curvature import curvature_report
 
     rep = curvature_report(traj.t, traj.twist(), (platform or ropod_platform()).positions,
                            limits.curvature_radius_min)

@@ -124,7 +124,8 @@ def row_kernel(grid: RowGrid, sample_kernel: np.ndarray) -> np.ndarray:
 
 def current_kernel(grid: RowGrid) -> np.ndarray:
     """Per-sample kernel of a row's torque: :attr:`RowGrid.torque_kernel` (the mean over
-    2⌊step/2⌋ + 1 samples; after the quartic smoother a quadratic Savitzky–Golay kernel)."""
+    2⌊step/2⌋ + 1 samples; after the quartic smoother least-norm weights over 2·step + 1
+    samples)."""
     return grid.torque_kernel
 
 

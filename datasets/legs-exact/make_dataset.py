@@ -15,7 +15,7 @@ platform's default, 0.81 m, 002 eq. 26) and ``original.csv.gz`` … ``mirrored_n
 low-level control (PI speed loops on the drives: kp 20 N m s/rad, ki 200 N m/rad, 30 N m limit;
 PD loops on the steering angles: D 10 N m s/rad, P 200 N m/rad, 28 N m limit) at a 1 ms
 control step, each current the mean over its 4 ms log interval (``simulate
---current-average``). Takes about ten minutes.
+--current-average``). Takes about six minutes.
 """
 
 from __future__ import annotations

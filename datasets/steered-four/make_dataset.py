@@ -19,7 +19,7 @@ A) under the decentralised controllers of 001 (eqs. 24–25): PI speed loops on 
 s/rad, P_s 800 N m/rad, 129 N m limit), each current the mean over its 10 ms log interval
 (``simulate --current-average``: sampled at the log instant, the currents alias the steering
 loops' fast torques and J_st comes out 2.3 % high, 4–6σ with sensor noise).
-``platform.yaml`` (with its comments) is read, not written. Takes about eight minutes.
+``platform.yaml`` (with its comments) is read, not written. Takes about six minutes.
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ drive: kp 20 N m s/rad, ki 200 N m/rad, 25.6 N m limit; PD loops on the steering
 40 N m s/rad, P_s 800 N m/rad, 129 N m limit), each current the mean over its 10 ms log
 interval (``simulate --current-average``: point samples alias the loops' torques, and the
 casters' J_zz,wh comes out up to 19 % low). ``platform.yaml`` (with its comments) is read, not
-written. Takes about eight minutes.
+written. Takes about four minutes.
 """
 
 from __future__ import annotations

@@ -54,6 +54,12 @@ Modules (every public name is re-exported here):
   :func:`optimize` (finite Fourier series, Swevers et al.).
 """
 
+from ropod_sysid.trajectory.curvature import (
+    MOVING_SPEED,
+    CurvatureReport,
+    curvature_radius,
+    curvature_report,
+)
 from ropod_sysid.trajectory.excitation import (
     MAX_HARMONICS,
     MAX_LAG,
@@ -89,14 +95,10 @@ from ropod_sysid.trajectory.limits import _check_floor as _check_floor
 from ropod_sysid.trajectory.pivots import PivotPrediction, predict_pivots, trailing_pivots
 from ropod_sysid.trajectory.plotting import plot
 from ropod_sysid.trajectory.precheck import (
-    MOVING_SPEED,
     CheckReport,
-    CurvatureReport,
     Finding,
     SingularReport,
     check,
-    curvature_radius,
-    curvature_report,
     run_singular_report,
     singular_report,
     true_parameters,

@@ -508,7 +508,7 @@ def _verify(traj: Trajectory, platform: Platform, limits: Limits,
     turning rates, flags (a wheel flip with a pivot-rate limit; a wheel at rest, type A,
     always) and wheel rates of a run on its own grid, with its planned own coordinates."""
     from ropod_sysid.model import PlatformModel
-    from ropod_sysid.trajectory.precheck import curvature_report
+    from ropod_sysid.trajectory.curvature import curvature_report
 
     rates = traj.twist_rates()
     if traj.speed().max() > limits.v_max:

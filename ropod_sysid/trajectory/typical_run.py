@@ -26,6 +26,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.assembly import SINGULAR_MARGIN
 from ropod_sysid.platform import Platform, ropod_platform
 from ropod_sysid.trajectory.blends import _path, _Plan, _sample
+from ropod_sysid.trajectory.curvature import curvature_report
 from ropod_sysid.trajectory.limits import (
     DEFAULT_FLOOR,
     PIVOT_DESIGN_MARGIN,
@@ -35,7 +36,6 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
-from ropod_sysid.trajectory.precheck import curvature_report
 from ropod_sysid.trajectory.prediction import predict_angles, steering_points, trailing_points
 from ropod_sysid.trajectory.run_variants import _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory, with_planned
