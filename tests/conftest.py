@@ -6,16 +6,20 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
-import pytest
+if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already: one BLAS
+    # thread each, set before numpy loads (two spinning pools per core made the leg fits three
+    # times slower), and reports draw in-process (Painter(2) is tested)
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+    os.environ.setdefault("ROPOD_SYSID_DRAWERS", "1")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 from ropod_sysid.io import Log, read_log
 from ropod_sysid.params import Parameters, thesis_fixed_masses
 from ropod_sysid.platform import Platform, load_platform, ropod_platform
 from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
-
-if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already: reports
-    os.environ.setdefault("ROPOD_SYSID_DRAWERS", "1")  # draw in-process (Painter(2) is tested)
 
 DATASETS = Path(__file__).resolve().parent.parent / "datasets"
 
@@ -32,10 +36,12 @@ def shipped(name: str) -> tuple[Platform, Parameters, list[Log]]:
 OFF_SQUARE = np.array([[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]])
 
 
-def smooth_setpoints(duration: float, sx: float, sw: float, dt: float = 0.01) -> Setpoints:
+def smooth_setpoints(duration: float, sx: float, sw: float, dt: float = 0.01,
+                     ramp: float = 1.5, rest: float = 0.5) -> Setpoints:
     """A smooth, rest-to-rest run: sinusoids under a C² smoothstep envelope.
 
-    ``sx`` = ±1 negates the translations, ``sw`` = ±1 mirrors (the four variants of Sec. VI-A).
+    ``sx`` = ±1 negates the translations, ``sw`` = ±1 mirrors (the four variants of Sec. VI-A);
+    the envelope rises over ``ramp`` [s], falls over ``ramp`` and rests for the last ``rest``.
     """
     t = np.arange(0.0, duration + dt / 2, dt)
 
@@ -43,16 +49,17 @@ def smooth_setpoints(duration: float, sx: float, sw: float, dt: float = 0.01) ->
         u = np.clip(u, 0.0, 1.0)
         return u**3 * (10 - 15 * u + 6 * u**2)
 
-    end = duration - 0.5
-    env = smoothstep(t / 1.5) * smoothstep((end - t) / 1.5)
+    end = duration - rest
+    env = smoothstep(t / ramp) * smoothstep((end - t) / ramp)
     vx = sx * env * (0.6 + 0.4 * np.sin(2 * np.pi * t / 6))
     vy = sx * sw * 0.3 * np.sin(2 * np.pi * t / 8) * env
     om = sw * 0.8 * np.sin(2 * np.pi * t / 5) * env
     return Setpoints(t, vx, vy, om)
 
 
-def four_variants(duration: float) -> list[Setpoints]:
-    return [smooth_setpoints(duration, sx, sw) for sx, sw in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+def four_variants(duration: float, ramp: float = 1.5, rest: float = 0.5) -> list[Setpoints]:
+    return [smooth_setpoints(duration, sx, sw, ramp=ramp, rest=rest)
+            for sx, sw in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
 
 
 @pytest.fixture(scope="session")

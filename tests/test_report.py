@@ -159,15 +159,54 @@ def test_every_section_and_figure(full_html):
     for sid in (*SECTIONS, "validation", "null-space", "parameter-table"):
         assert sid in page.ids, sid
     # per fit log: Fig. 13 and inputs; the first log's predicted velocity, singular values,
-    # parameter correlation (issue 17), histograms, residual vs velocity, residual
-    # autocorrelation (issue 14); one observer view per validation log
-    check_images(page, 2 * 2 + 6 + 1)
+    # histograms, residual vs velocity, residual autocorrelation (issue 14); one observer view
+    # per validation log; the parameter correlation (issue 17) is a table
+    check_images(page, 2 * 2 + 5 + 1)
     assert len(page.all("figcaption")) == 11
     text = " ".join(page.text)
     for phrase in ("RMS translation", "RMS rotation", "Condition number", "Input delay",
                    "Friction model", "per-wheel", "Smoother span", "Rank",
                    "Residual autocorrelation", "jackknife over 6 stretches of 2 s"):
         assert phrase in text, phrase
+
+
+def test_correlation_table_is_the_fits_covariance(sim, full_html):
+    """One row and column per parameter; each determined cell's r is cov_ij / √(cov_ii cov_jj)
+    of the fit, coloured on the blue–white–red scale; |r| ≥ 0.9 off the diagonal written."""
+    _, _, _, result = sim
+    sol = result.solution
+    table = full_html.split('id="correlation"', 1)[1].split("</table>", 1)[0]
+    rows = table.split("<tbody>", 1)[1].split("<tr>")[1:]
+    assert len(rows) == len(sol.names)
+    cov = sol.covariance
+    sd = np.sqrt(np.where(np.diag(cov) > 0, np.diag(cov), np.nan))
+    expect = cov / np.outer(sd, sd)
+    for i, row in enumerate(rows):
+        cells = row.split("<td ")[1:]
+        assert len(cells) == len(sol.names)
+        for j, cell in enumerate(cells):
+            if np.isnan(expect[i, j]):
+                assert "data-r" not in cell and "background:#dddddd" in cell
+                continue
+            r = float(cell.split('data-r="', 1)[1].split('"', 1)[0])
+            assert r == pytest.approx(expect[i, j], abs=6e-5)
+            written = cell.split(">", 1)[1].split("</td>", 1)[0]
+            assert bool(written) == (i != j and abs(expect[i, j]) >= 0.9), (i, j, written)
+    assert any("data-r" in c for c in rows[0].split("<td ")[1:])
+
+
+def test_correlation_colours_and_undetermined_cells():
+    from ropod_sysid.report.correlation import colours, correlation, correlation_table
+
+    assert list(colours(np.array([-1.0, 0.0, 1.0, np.nan]))) == [
+        "#2166ac", "#f7f7f7", "#b2182b", "#dddddd"]
+    cov = np.array([[4.0, -3.8, 0.0], [-3.8, 4.0, 0.0], [0.0, 0.0, 0.0]])
+    r = correlation(cov, 3)
+    assert r[0, 1] == pytest.approx(-0.95) and np.isnan(r[2]).all()
+    assert np.isnan(correlation(np.zeros((0, 0)), 2)).all()  # no covariance: nothing shown
+    table = correlation_table(["a", "b", "<c>"], cov)
+    assert [c["text"] for c in table["rows"][0]["cells"]] == ["", "-.95", ""]
+    assert table["rows"][2]["cells"][2]["title"] == "<c> – <c>: not determined"
 
 
 def test_self_contained(full_html):
@@ -261,7 +300,7 @@ def test_written_atomically_without_compare_or_validation(sim, tmp_path):
     assert "validation" not in page.ids
     assert all(s in page.ids for s in SECTIONS)
     check_self_contained(page)
-    check_images(page, 2 * 2 + 6)  # + autocorrelation, correlation, prediction
+    check_images(page, 2 * 2 + 5)  # + autocorrelation, prediction
     assert "Δ/σ" not in html
 
 
@@ -296,7 +335,7 @@ def test_report_command(files):
     html = out.read_text(encoding="utf-8")
     page = Page(html)
     check_self_contained(page)
-    check_images(page, 2 * 2 + 6 + 1)  # + autocorrelation, correlation, prediction
+    check_images(page, 2 * 2 + 5 + 1)  # + autocorrelation, prediction, observer
     assert {*SECTIONS, "validation"} <= page.ids
     assert "<script" not in html.lower()  # the log's file name holds <script>
     assert "&lt;script&gt;alert(1)&lt;script&gt;" in html
@@ -311,7 +350,7 @@ def test_fit_with_report(files):
     assert r.exit_code == 0, r.output
     page = Page(out.read_text(encoding="utf-8"))
     assert {*SECTIONS, "validation"} <= page.ids
-    check_images(page, 2 * 2 + 6 + 1)  # two logs fitted (a 6 s log alone is too short)
+    check_images(page, 2 * 2 + 5 + 1)  # two logs fitted (a 6 s log alone is too short)
     assert "truth.json" in " ".join(page.text)
 
 

@@ -56,6 +56,12 @@ def assert_identical(a: list, b: list) -> None:
             np.testing.assert_array_equal(getattr(ra, f), getattr(rb, f))
 
 
+def brisk(duration: float) -> list[Setpoints]:
+    """The four variants of a short run that still moves: 0.3 s ramps, 0.1 s at rest (the
+    engines are compared step by step; a long run adds time, not cases)."""
+    return four_variants(duration, ramp=0.3, rest=0.1)
+
+
 def both(*args: object, **kwargs: object) -> tuple[list, list]:
     return simulate(*args, engine="numba", **kwargs), simulate(*args, engine="numpy", **kwargs)
 
@@ -64,10 +70,11 @@ def test_ropod_runs_of_two_lengths_with_force_and_sensors(off_square) -> None:
     """Two runs of different length batched (the shorter one stops at its own end), pushed by
     an external force, recorded with quantised encoders, current noise and jitter."""
     truth = thesis_fixed_masses(off_square.unit_names)
-    runs = [smooth_setpoints(2.0, 1, 1), smooth_setpoints(1.5, -1, -1)]
+    runs = [smooth_setpoints(1.0, 1, 1, ramp=0.3, rest=0.1),
+            smooth_setpoints(0.8, -1, -1, ramp=0.3, rest=0.1)]
     sensors = Sensors(encoder_counts=2**14, current_noise=0.03, jitter=2e-4, seed=3)
     fast, ref = both(off_square, truth, runs, rate=500.0, force=PUSH, sensors=sensors)
-    assert [len(r.log.t) for r in fast] == [1001, 751]
+    assert [len(r.log.t) for r in fast] == [501, 401]
     assert np.abs(fast[0].f_b).max() == 12.0
     assert np.abs(fast[0].q[:, :2]).max() > 0.02  # it moved
     assert np.abs(fast[0].tau).max() > 0.5
@@ -79,9 +86,9 @@ def test_ropod_torque_limit_zero_angles_and_body_friction(off_square) -> None:
     friction in place of the units' (a swivel kernel without friction)."""
     truth = Parameters(dict(thesis_fixed_masses(off_square.unit_names).without_friction())
                        | {n: 10 * v for n, v in PAPER_BODY.items()})
-    t = np.array([0.0, 0.05, 0.06, 0.8])
+    t = np.array([0.0, 0.05, 0.06, 0.5])
     step = Setpoints(t, np.array([0, 0, 0.8, 0.8]), 0 * t, np.array([0, 0, 1.0, 1.0]))
-    fast, ref = both(off_square, truth, [step, four_variants(0.8)[1]], rate=1000.0,
+    fast, ref = both(off_square, truth, [step, brisk(0.5)[1]], rate=1000.0,
                      controller=Controller(kp=3.0, ki=30.0, torque_limit=0.8), initial=None)
     assert np.isclose(np.abs(fast[0].tau).max(), 0.8)
     assert_same_runs(fast, ref)
@@ -94,7 +101,7 @@ def test_5dpo(friction: str) -> None:
     if friction == "body":
         values = {n: v for n, v in values.items() if n[:3] not in ("fov", "foc")} | PAPER_BODY
     truth = Parameters(values)
-    fast, ref = both(pf, truth, four_variants(1.5)[1:3], rate=200.0, controller=OMNI_CONTROL,
+    fast, ref = both(pf, truth, brisk(0.8)[1:3], rate=200.0, controller=OMNI_CONTROL,
                      force=PUSH)
     assert np.abs(fast[0].qd[:, :2]).max() > 0.05
     assert_same_runs(fast, ref)
@@ -107,7 +114,7 @@ def test_mixed_platform_with_shared_friction() -> None:
     truth = Parameters({"m_b": 30.0, "Jzz_b": 3.0, "Jrot_o": 0.004, "m_wh": 4.2,
                         "Jzz_wh": 0.012, "Jrot_w": 0.0105, "fwv": -0.04, "fwc": -0.2,
                         "fpv": 0.18, "fpc": 0.02, "fov": -0.01, "foc": -0.05})
-    fast, ref = both(pf, truth, four_variants(1.2)[:2], rate=200.0, force=PUSH,
+    fast, ref = both(pf, truth, brisk(0.8)[:2], rate=200.0, force=PUSH,
                      sensors=Sensors(current_noise=0.01, seed=1))
     assert np.abs(fast[1].q[:, :2]).max() > 1e-3
     assert_same_runs(fast, ref)
@@ -118,7 +125,8 @@ def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
     for the compiled loop names the platform's types."""
     pf = mixed_platform()
     truth = Parameters(dict(typical_parameters(pf, 30.0, 3.0)) | {"Jrot_o": 0.004})
-    runs = four_variants(0.6)[:1]  # 600 steps: long enough for the compiled loop
+    monkeypatch.setattr(ropod_sysid.simulate, "MIN_COMPILED_STEPS", 100)
+    runs = brisk(0.25)[:1]  # 250 steps: long enough for the compiled loop (at this threshold)
     ref = simulate(pf, truth, runs, engine="numpy")
     monkeypatch.delattr(OmniUnits, "compiled")
     assert_identical(simulate(pf, truth, runs), ref)
@@ -130,7 +138,8 @@ def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
 
 def test_numpy_fallback_without_numba(monkeypatch, off_square) -> None:
     truth = thesis_fixed_masses(off_square.unit_names)
-    runs = four_variants(0.6)[:1]  # 600 steps: the compiled loop's under auto
+    monkeypatch.setattr(ropod_sysid.simulate, "MIN_COMPILED_STEPS", 100)
+    runs = brisk(0.25)[:1]  # 250 steps: the compiled loop's under auto (at this threshold)
     ref = simulate(off_square, truth, runs, engine="numpy")
     simulate(off_square, truth, runs, engine="numba")  # ropod_sysid.simulate_jit imported
     monkeypatch.setitem(sys.modules, "numba", None)  # import numba raises ImportError
@@ -161,7 +170,7 @@ def test_auto_engine_by_run_length(off_square) -> None:
 
 def test_cli_engines_write_the_same_log(tmp_path, off_square) -> None:
     """``simulate --engine numba`` and ``--engine numpy`` write the same log to round-off (a
-    0.6 s run: ``auto`` would take numpy); a bad ``--engine`` is one line."""
+    0.3 s run: ``auto`` would take numpy); a bad ``--engine`` is one line."""
     from ropod_sysid.io import read_log
     from ropod_sysid.platform import save_platform
 
@@ -170,8 +179,8 @@ def test_cli_engines_write_the_same_log(tmp_path, off_square) -> None:
     save_platform(off_square, tmp_path / "p.yaml")
     (tmp_path / "truth.json").write_text(json.dumps(
         thesis_fixed_masses(off_square.unit_names).to_mapping()))
-    t = np.arange(0, 0.605, 0.01)
-    v = 0.5 * np.sin(np.pi * t / 0.6) ** 2
+    t = np.arange(0, 0.305, 0.01)
+    v = 1.0 * np.sin(np.pi * t / 0.3) ** 2
     np.savetxt(tmp_path / "traj.csv", np.column_stack([t, v, 0.3 * v, 0.5 * v]),
                delimiter=",", header="t,vx,vy,omega", comments="")
     args = ["simulate", "--platform", str(tmp_path / "p.yaml"), "--params",

@@ -59,6 +59,7 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
+from ropod_sysid.report.correlation import correlation_table
 from ropod_sysid.report.painter import Drawn, Painter, Pending, png_uri
 from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
@@ -438,7 +439,6 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
     figures = {
         "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
                                   result.options.rcond),
-        "corr_figure": painter.draw("correlation_matrix", sol.names, sol.covariance),
         "hist_figure": painter.draw("residual_histograms", all_err),
         "vel_figure": painter.draw("residual_vs_velocity", all_vel, all_err),
         "acf_figure": painter.draw("residual_autocorrelation", series, STRETCH_S),
@@ -506,6 +506,7 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
         "n_combination": int(np.sum(sol.combination)),
         "null_space": sol.null_space_text(),
         "combinations": [(k, v) for k, v in sol.combinations.items()],
+        "corr": correlation_table(sol.names, sol.covariance),
         **figures,
         "validation": validation,
         "thresholds": {"force": FORCE_THRESHOLD, "torque": TORQUE_THRESHOLD},

@@ -379,34 +379,6 @@ def predicted_velocity(t: np.ndarray, measured: np.ndarray, predicted: np.ndarra
         return _png(fig)
 
 
-def correlation_matrix(names: Sequence[str], covariance: np.ndarray) -> bytes:
-    """The correlation of the fitted parameters, cov_ij / √(cov_ii cov_jj) in [−1, 1] (grey:
-    fixed, or determined only in combination); |r| ≥ 0.9 written in the cell."""
-    cov = np.asarray(covariance, float)
-    p = len(names)
-    corr = np.full((p, p), np.nan)
-    if cov.shape == (p, p):
-        d = np.sqrt(np.where(np.diag(cov) > 0, np.diag(cov), np.nan))
-        corr = cov / np.outer(d, d)
-    size = min(10.0, 2.5 + 0.24 * p)
-    with _style():
-        fig = _figure(size, size * 0.86, left=0.14, bottom=0.14, right=0.9, top=0.95)
-        ax = fig.add_subplot()
-        ax.grid(False)
-        cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="#dddddd")
-        im = ax.imshow(np.ma.masked_invalid(corr), cmap=cmap, vmin=-1.0, vmax=1.0,
-                       interpolation="nearest")
-        ax.set_xticks(range(p), names, rotation=90, fontsize=7)
-        ax.set_yticks(range(p), names, fontsize=7)
-        for i, j in zip(*np.nonzero(np.abs(np.nan_to_num(corr)) >= 0.9), strict=True):
-            if i != j:
-                ax.text(j, i, f"{corr[i, j]:.2f}".replace("0.", "."), ha="center",
-                        va="center", fontsize=5.5, color="white")
-        fig.colorbar(im, ax=ax, fraction=0.04, pad=0.02)
-        _title(ax, "parameter correlation")
-        return _png(fig)
-
-
 def residual_histograms(residuals: np.ndarray) -> bytes:
     """Histogram of the error b − A m* per DOF over all samples of all logs, with the normal
     density of the same mean and standard deviation."""
