@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
+
+# cache the rewritten test modules and the package's bytecode (in the git-ignored __pycache__)
+# even where PYTHONDONTWRITEBYTECODE is set: every test worker collects every file, which
+# took 8.3 s compiling them anew against 4.6 s cached (measured on this suite)
+sys.dont_write_bytecode = False
 
 if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already: one BLAS
     # thread each, set before numpy loads (two spinning pools per core made the leg fits three

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import logging
 import sys
@@ -17,7 +18,8 @@ from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.platform import save_platform
 from ropod_sysid.stream import validate_sources
 
-distributed = pytest.importorskip("distributed")
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("distributed") is None,
+                                reason="the dask extra is not installed")
 
 
 @pytest.fixture(scope="module")
@@ -39,6 +41,8 @@ def cluster():
     2 s on an idle machine here and over 10 s on a busy one. Worker processes are exercised
     by benchmarks/run.py (`fit --workers 2`); what they add — pickling the arguments and
     results — is checked by test_task_arguments_and_results_pickle."""
+    import distributed  # here, not at collection: every test worker collects every file
+
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   dashboard_address=None, silence_logs=logging.ERROR) as c:
         yield c
