@@ -1,5 +1,6 @@
 """Shared, session-scoped simulations: simulated once, used by every test that needs a run."""
 
+# ruff: noqa: E402 (the settings below must come before numpy and the package load)
 from __future__ import annotations
 
 import json
@@ -19,8 +20,8 @@ if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already
         os.environ.setdefault(_var, "1")
     os.environ.setdefault("ROPOD_SYSID_DRAWERS", "1")
 
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import numpy as np
+import pytest
 
 from ropod_sysid.io import Log, read_log
 from ropod_sysid.params import Parameters, thesis_fixed_masses
