@@ -246,7 +246,7 @@ print(time.perf_counter() - t0, n)
 WRITE_MCAP = """
 import sys
 from ropod_sysid.io.csvlog import read_csv_log
-from ropod_sysid.io.mcaplog import write_mcap_log
+from ropod_sysid.io.mcapwrite import write_mcap_log
 from ropod_sysid.io.smartwheel import write_smartwheel
 from ropod_sysid.platform import load_platform
 pf = load_platform(sys.argv[2])

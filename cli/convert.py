@@ -16,7 +16,7 @@ from ropod_sysid.cli.common import (
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import log_format, read_log
 from ropod_sysid.io.csvlog import write_csv_log
-from ropod_sysid.io.mcaplog import write_mcap_log
+from ropod_sysid.io.mcapwrite import write_mcap_log
 from ropod_sysid.io.smartwheel import write_smartwheel
 from ropod_sysid.platform import load_platform
 

@@ -269,10 +269,10 @@ def mcap_with_message(d: Path, path: Path, k: int, replace: tuple[bytes, bytes])
     import json
     import re
 
-    from ropod_sysid.io.mcaplog import (
+    from ropod_sysid.io.mcaplog import UNIT_FIELDS
+    from ropod_sysid.io.mcapwrite import (
         CONTRACT_JSON_SCHEMA,
         CONTRACT_TOPIC,
-        UNIT_FIELDS,
         contract_json_schema,
         new_writer,
     )

@@ -19,12 +19,11 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_logs
 from ropod_sysid.io import read_log, write_log
 from ropod_sysid.io.csvlog import read_csv_log, write_csv_log
-from ropod_sysid.io.mcaplog import (
+from ropod_sysid.io.mcaplog import read_mcap_log, scan_mcap
+from ropod_sysid.io.mcapwrite import (
     CHUNK_SIZE,
     CONTRACT_TOPIC,
     contract_json_schema,
-    read_mcap_log,
-    scan_mcap,
     write_mcap_log,
 )
 from ropod_sysid.platform import platform_from_dict
@@ -433,7 +432,7 @@ def write_ros2_messages(path, messages):
     """A contract ROS 2 file of the given message dicts (any units, arrays and poses)."""
     from mcap_ros2._dynamic import serialize_dynamic
 
-    from ropod_sysid.io.mcaplog import CONTRACT_MSGDEF, CONTRACT_ROS2_SCHEMA, new_writer
+    from ropod_sysid.io.mcapwrite import CONTRACT_MSGDEF, CONTRACT_ROS2_SCHEMA, new_writer
 
     encode = serialize_dynamic(CONTRACT_ROS2_SCHEMA, CONTRACT_MSGDEF)[CONTRACT_ROS2_SCHEMA]
     with open(path, "wb") as f:
@@ -568,7 +567,7 @@ def test_log_channel_interleaved_with_another_reads_the_same(tmp_path, mcap_file
                                                               encoding):
     """Chunks that mix our channel with another topic's messages (as a robot's recording
     does) give the same log, whole and in chunks."""
-    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.io.mcapwrite import new_writer
 
     scan = scan_mcap(mcap_files[encoding])
     (channel,) = scan.channels.values()

@@ -18,7 +18,7 @@ from ropod_sysid.cli.main import main
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files
 from ropod_sysid.io import read_log
-from ropod_sysid.io.mcaplog import CONTRACT_MSGDEF, CONTRACT_ROS2_SCHEMA, CONTRACT_TOPIC
+from ropod_sysid.io.mcapwrite import CONTRACT_MSGDEF, CONTRACT_ROS2_SCHEMA, CONTRACT_TOPIC
 from ropod_sysid.platform import save_platform
 
 from .swivel_arrays import C, D, P
@@ -145,7 +145,7 @@ def test_shipped_message_definition_is_the_one_written(tmp_path, off_square,
     import yaml
     from mcap.reader import make_reader
 
-    from ropod_sysid.io.mcaplog import write_mcap_log
+    from ropod_sysid.io.mcapwrite import write_mcap_log
 
     shipped = Path(__file__).resolve().parents[1] / "msg" / "ropod_sysid_msgs" / "msg"
     assert (shipped / "LogSample.msg").read_text() == CONTRACT_MSGDEF
@@ -191,7 +191,7 @@ def test_kelo_drive_messages_read_like_the_smart_wheel_layout(tmp_path) -> None:
     mapping, signs and pivot offsets, like the smart-wheel layout."""
     from mcap_ros2._dynamic import serialize_dynamic
 
-    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.io.mcapwrite import new_writer
     from ropod_sysid.io.smartwheel import raw_frames
     from ropod_sysid.params import thesis_fixed_masses
     from ropod_sysid.platform import load_platform
@@ -251,7 +251,7 @@ def test_any_robots_joint_states_through_the_platform_files_mapping(tmp_path) ->
     import yaml
     from mcap_ros2._dynamic import serialize_dynamic
 
-    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.io.mcapwrite import new_writer
     from ropod_sysid.params import typical_parameters
     from ropod_sysid.platform import load_platform, platform_from_dict
     from ropod_sysid.simulate import Controller, simulate

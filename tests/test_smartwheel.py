@@ -301,7 +301,7 @@ def test_fewer_smartwheel_frames_than_messages_when_fields_are_missing(tmp_path,
     """A message that lacks a field is dropped as malformed (the first one must be whole)."""
     import json
 
-    from ropod_sysid.io.mcaplog import new_writer
+    from ropod_sysid.io.mcapwrite import new_writer
     from ropod_sysid.io.smartwheel import SW_FIELDS
 
     log, _ = clean

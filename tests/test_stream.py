@@ -272,7 +272,7 @@ def test_other_formats_are_read_whole_and_reduced_in_chunks(tmp_path, off_square
 
     log = runs_off_square[1].log
     if kind == "mcap":
-        from ropod_sysid.io.mcaplog import write_mcap_log
+        from ropod_sysid.io.mcapwrite import write_mcap_log
 
         p = tmp_path / "run.mcap"
         write_mcap_log(log, p)

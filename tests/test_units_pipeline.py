@@ -90,7 +90,7 @@ def test_omni_wheel_odometry_follows_the_true_pose(five_dpo) -> None:
 
 def test_ros2_mcap_refuses_omni_units_in_one_line(tmp_path, five_dpo) -> None:
     from ropod_sysid.errors import InputError
-    from ropod_sysid.io.mcaplog import write_mcap_log
+    from ropod_sysid.io.mcapwrite import write_mcap_log
 
     pf, _, sims = five_dpo
     with pytest.raises(InputError, match="carries smart-wheel .swivel. units only"):

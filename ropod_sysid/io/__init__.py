@@ -121,7 +121,7 @@ def write_log(log: Log, path: str | Path, platform: Platform | None = None) -> N
 
         write_csv_log(log, path)
         return
-    from ropod_sysid.io.mcaplog import write_mcap_log
+    from ropod_sysid.io.mcapwrite import write_mcap_log
 
     write_mcap_log(log, path)
 

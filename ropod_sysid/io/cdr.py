@@ -124,7 +124,7 @@ CONTRACT_ARRAYS = ("delta", "phi_l", "phi_r", "cur_l", "cur_r")
 
 
 def contract_layout(template: bytes, msg: Any) -> FixedLayout | None:
-    """The fixed layout of our contract message (:data:`ropod_sysid.io.mcaplog.CONTRACT_MSGDEF`)
+    """The fixed layout of our contract message (:data:`ropod_sysid.io.mcapwrite.CONTRACT_MSGDEF`)
     like ``msg``, the per-message decoding of ``template``: fields ``t`` and the five arrays
     ``values`` (5, len) and ``pose`` (len)."""
     try:

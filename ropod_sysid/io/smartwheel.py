@@ -546,7 +546,7 @@ def _write_csv(f: dict[str, np.ndarray], path: Path) -> None:
 
 def _write_mcap(f: dict[str, np.ndarray], recv: np.ndarray, out: Any, encoding: str,
                 topic: str) -> None:
-    from ropod_sysid.io.mcaplog import OFFERED_QOS, new_writer
+    from ropod_sysid.io.mcapwrite import OFFERED_QOS, new_writer
 
     n_frames, n = f["sensor_ts"].shape
     lists = {name: f[name].tolist() for name in SW_FIELDS}
