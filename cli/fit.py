@@ -19,7 +19,7 @@ from ropod_sysid.cli.common import (
     writes,
 )
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import ROBUST_METHODS, FitOptions, FitResult, fit_files
+from ropod_sysid.fit import FitOptions, FitResult, fit_files
 from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
@@ -27,6 +27,7 @@ from ropod_sysid.io.paramfile import DEFAULT_NODE, ParameterFile, write_paramete
 from ropod_sysid.io.timebase import GAP_RULE
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
+from ropod_sysid.robust import ROBUST_METHODS
 from ropod_sysid.solve import RCOND
 from ropod_sysid.stream import validate_sources
 from ropod_sysid.summary import format_fit, format_validation

@@ -314,8 +314,7 @@ def predicted_solution(a: np.ndarray, truth: np.ndarray, names: list[str] | None
     """The fit's solution (:func:`ropod_sysid.solve.solve`) of noise-free rows ``a`` (M, D, p)
     whose b_ID is A m for the values ``truth`` (p,): its rank, the columns it keeps and the
     combinations it names (``names``, default p0, p1, …)."""
-    from ropod_sysid.fit import gram_triangle
-    from ropod_sysid.solve import solve
+    from ropod_sysid.solve import gram_triangle, solve
 
     rows = a.reshape(-1, a.shape[-1])
     ab = np.column_stack([rows, rows @ truth])

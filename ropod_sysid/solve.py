@@ -589,3 +589,10 @@ def _slides(null: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> bool:
             if np.all(d[lower] >= 0) and np.all(d[upper] <= 0):
                 return True
     return False
+
+
+def gram_triangle(gram: np.ndarray) -> np.ndarray:
+    """An upper triangle R with RᵀR = ``gram`` (p+1, p+1), from its eigen-decomposition so that
+    a semi-definite Gram matrix (a rank-deficient problem) keeps its null space."""
+    lam, vec = np.linalg.eigh(0.5 * (gram + gram.T))
+    return np.linalg.qr(np.sqrt(np.maximum(lam, 0.0))[:, None] * vec.T, mode="r")

@@ -9,18 +9,17 @@ import numpy as np
 import pytest
 
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import (
+from ropod_sysid.fit import FitOptions, fit_logs
+from ropod_sysid.robust import (
     BISQUARE_C,
     HUBER_C,
-    FitOptions,
     bisquare_weights,
-    fit_logs,
-    gram_triangle,
     huber_weights,
     robust_scale,
     stretch_rms,
 )
 from ropod_sysid.simulate import ForceSchedule, Sensors, simulate
+from ropod_sysid.solve import gram_triangle
 from tests.conftest import smooth_setpoints
 from tests.test_cli import one_line_error, run
 
