@@ -12,31 +12,39 @@ predicted b_ID = A_ID,ext m; σ̂² follows from the sensors, traced through the
   of a row carries B_τ diag(k_t² σ_i²) B_τᵀ, through the torque average over the row step and the
   rows' LOESS (kernel g_τ: :func:`row_kernel`);
 * **encoder quantisation**, 2π/counts per count, uniform: σ_φ² = (2π/counts)² / 12 per angle
-  and sample while the angle moves a count per sample or more (a slower angle steps rarely:
-  its share is its counts per sample). The angles are smoothed (LOESS of k samples), the pose
-  follows by odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from the units'
-  constraint rows C ν = D φ̇), and two central differences give q̈: the acceleration error is
-  R(θ) G (g_q ⊛ e) / dt² (g_q the smoother and the two differences), which enters the rows as
-  M_dir δq̈ (the acceleration terms of A_ID,ext m) and passes the rows' LOESS with them.
+  and sample while the angle moves a count per sample or more (a slower angle steps rarely: its
+  error is a sampled sawtooth, :func:`sawtooth_share`). The angles are smoothed (LOESS of k
+  samples), the pose follows by odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from
+  the units' constraint rows C ν = D φ̇), and two central differences give q̈: the acceleration
+  error is R(θ) G (g_q ⊛ e) / dt² (g_q the smoother and the two differences), which enters the
+  rows as M_dir δq̈ (the acceleration terms of A_ID,ext m) and passes the rows' LOESS with
+  them.
 
 Both are white per sample before the filters, so a row carries σ² ‖g‖² of each, g the whole
 kernel from the samples to the row. σ̂² is the mean over rows and DOFs of the weighted
 variances; the fit's c is 1/Σh_r² of the rows' kernel h_r.
 
 The errors of q̈ also sit in A_ID,ext itself (errors in the variables), and a least-squares fit
-shrinks the columns they blur: E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m, with
-E[δAᵀδA] from ∂A/∂q̈ (A is linear in q̈) and the covariance of q̈'s errors, and from ∂A/∂φ̇ for
-the measured angle rates a type uses (the swivel's δ̇). Through the swivel's caster offset the
-pivots' acceleration carries q̈ / d, so the unit-inertia columns carry q̈'s errors a
-hundredfold: this bias, not σ, limits a run that a white-noise criterion calls excellent. It
-does not shrink with the run's length. (Measured, 20 seeds: on the 37 s typical and optimised
-runs of the off-square ropod the predicted and the fits' mean errors agree within 1–7 %; on
-the 30 s typical run they do not — −1.8 kg predicted for m_b, +0.7 ± 0.3 kg fitted — for a
-reason not found.) The errors of A's angle-dependent columns are second order and left out.
+shrinks the columns they blur: E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m, with E[δAᵀδA] from
+∂A/∂q̈ (A is linear in q̈) and the covariance of q̈'s errors, and from ∂A/∂φ̇ for the measured
+angle rates a type uses (the swivel's δ̇). What ``fit --encoder-counts`` subtracts
+(:func:`fit_error_gram`) carries each encoder's errors through the fit's own recipe instead
+(:func:`recipe_error_gram`: the steering rates' term of the odometry's q̈, the projection onto
+the allowed motions, the held joints and the rows at rest, which the planned rows here leave
+out); measured against the quantised − exact rows of steered-swivel and legs-exact, its
+inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65, cause not found).
+Through the swivel's caster offset the pivots' acceleration carries q̈ / d, so the unit-inertia
+columns carry q̈'s errors a hundredfold: this bias, not σ, limits a run that a white-noise
+criterion calls excellent. It does not shrink with the run's length. (Measured, 20 seeds: on
+the 37 s typical and optimised runs of the off-square ropod the predicted and the fits' mean
+errors agree within 1–7 %; on the 30 s typical run they do not — −1.8 kg predicted for m_b,
++0.7 ± 0.3 kg fitted — for a reason not found.) The errors of A's angle-dependent columns are
+second order and left out.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -149,6 +157,49 @@ def encoder_variance(counts: int) -> float:
     return (2.0 * math.pi / counts) ** 2 / 12.0
 
 
+@functools.lru_cache(maxsize=16)
+def _sawtooth_table(kernel: bytes, points: int = 512, harmonics: int = 400
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(c, share) on [0, 1] counts per sample for the kernel (bytes of float64)."""
+    g = np.frombuffer(kernel)
+    n_fft = 1 << 15
+    f = np.fft.rfftfreq(n_fft)
+    h2 = np.abs(np.fft.rfft(g, n_fft)) ** 2
+    c = np.linspace(0.0, 1.0, points + 1)
+    k = np.arange(1, harmonics + 1)
+    fr = np.outer(c, k) % 1.0
+    fr = np.minimum(fr, 1.0 - fr)  # |H|² is even and of period 1 (aliasing)
+    # a sawtooth of c cycles per sample: harmonics k c of power step²/(2π²k²); white: step²/12
+    # (the harmonics past the last hold 1/(1.64 harmonics) of the power: 0.15 %)
+    share = (6.0 / np.pi**2) * (np.interp(fr, f, h2) / k**2).sum(axis=-1) / np.sum(g**2)
+    return c, share
+
+
+def sawtooth_share(kernel: np.ndarray, counts_per_sample: np.ndarray) -> np.ndarray:
+    """The variance of a kernel's output for an angle quantised while it moves ``c`` counts per
+    sample, over the white noise's (step²/12 ‖g‖²): below a count per sample the error is a
+    sampled sawtooth of c cycles per sample, whose harmonics k c (power step²/(2π²k²)) the
+    kernel passes by |H(k c)|² (aliased); white from one count on. (Measured on the
+    steered-four's steering angles: 0.6, 1.5, 2.5 for c in 0.02–0.05, 0.05–0.1, 0.1–0.2
+    against 0.71, 1.51, 2.57 by this formula; the share is not c, which is 10–25× smaller.)"""
+    c, share = _sawtooth_table(np.ascontiguousarray(kernel, float).tobytes())
+    a = np.abs(counts_per_sample)
+    return np.where(a >= 1.0, 1.0, np.interp(a, c, share))
+
+
+def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int) -> np.ndarray:
+    """Variance (N, J) of each angle channel's rate (``order`` 1) or acceleration (2) error at
+    the rows from quantisation: σ_φ² ‖g‖² of the whole kernel g to a row
+    (:func:`velocity_kernel` or :func:`acceleration_kernel` and the rows' LOESS) times the
+    :func:`sawtooth_share` of a channel moving |φ̇| dt / step counts per sample."""
+    kernel = (velocity_kernel if order == 1 else acceleration_kernel)(noise.k, noise.dt,
+                                                                     noise.degree)
+    full = row_kernel(noise.grid, kernel)
+    counts = int(noise.encoder_counts)  # type: ignore[arg-type]
+    cps = np.abs(rates) * noise.dt / (2.0 * math.pi / counts)
+    return encoder_variance(counts) * float(np.sum(full**2)) * sawtooth_share(full, cps)
+
+
 def odometry_gain(model: object, angles: np.ndarray) -> np.ndarray:
     """G (N, 3, J): the base-frame twist from the angle rates by the least squares of the
     units' constraint rows at ``angles`` (N, J), as odometry solves it (linear in the rates)."""
@@ -178,8 +229,6 @@ def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np
     n_dof = int(getattr(model, "n_dof", 3))
     if noise.encoder_counts is None:
         return np.zeros((th.size, n_dof, n_dof))
-    kernel = acceleration_kernel(noise.k, noise.dt, noise.degree)
-    power = float(np.sum(row_kernel(noise.grid, kernel) ** 2))
     g = odometry_gain(model, st.angles)  # type: ignore[attr-defined]  # (N, 3, J)
     c, s = np.cos(th), np.sin(th)
     rot = np.zeros((th.size, 3, 3))
@@ -189,13 +238,11 @@ def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np
     m[:, :3] = rot @ g
     own = np.asarray(getattr(model, "coordinate_channels", np.zeros(0, int)), int)
     m[:, 3 + np.arange(own.size), own] = 1.0
-    # an angle that moves less than a count per sample steps rarely: its error is a slow
-    # staircase, not white; its share of the white error's power is about the counts per sample
-    step = 2.0 * math.pi / int(noise.encoder_counts)
-    counts = np.abs(st.angle_rate) * noise.dt / step  # type: ignore[attr-defined]  # (N, J)
-    m = m * np.sqrt(np.minimum(counts, 1.0))[:, None, :]
+    # an angle that moves less than a count per sample steps rarely: its error is a sampled
+    # sawtooth, not white (sawtooth_share)
+    m = m * np.sqrt(channel_variances(noise, st.angle_rate, 2))[:, None, :]  # type: ignore[attr-defined]
     m[:, :, ~_encoders(model, g.shape[2])] = 0.0  # a leg's extension is no rotary encoder
-    return m @ np.swapaxes(m, 1, 2) * encoder_variance(int(noise.encoder_counts)) * power
+    return m @ np.swapaxes(m, 1, 2)
 
 
 def _encoders(model: object, n_angles: int) -> np.ndarray:
@@ -225,10 +272,7 @@ def regressor_error_gram(model: object, st: object, noise: SensorNoise,
         h = 1e-4
         rates = st.angle_rate  # type: ignore[attr-defined]
         base = model.a_id_ext(model.state(st.q, st.qd, st.angles, rates), qdd, friction)  # type: ignore[attr-defined]
-        kernel = velocity_kernel(noise.k, noise.dt, noise.degree)
-        power = float(np.sum(row_kernel(noise.grid, kernel) ** 2))
-        var = encoder_variance(int(noise.encoder_counts)) * power * np.minimum(
-            np.abs(rates) * noise.dt / (2.0 * math.pi / int(noise.encoder_counts)), 1.0)
+        var = channel_variances(noise, rates, 1)
         encoders = _encoders(model, rates.shape[1])
         for j in measured_rate_channels(model, st, qdd, friction):
             if not encoders[j]:
@@ -373,16 +417,183 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
                    friction: str = "per-wheel") -> np.ndarray:
     """E[δAᵀδA] (3, p, p) of the equation rows at samples ``index`` of a preprocessed block
     ``pre`` (:class:`ropod_sysid.regressor.Preprocessed`) for encoders of ``encoder_counts``
-    per revolution (:func:`regressor_error_gram` at the measured states): what ``fit
-    --encoder-counts`` subtracts from the normal equations (corrected least squares)."""
-    from ropod_sysid.regressor import row_inputs
-
-    rows = row_inputs(pre, index)  # type: ignore[arg-type]
-    st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
+    per revolution: what ``fit --encoder-counts`` subtracts from the normal equations
+    (corrected least squares). The errors are carried through the fit's own recipe
+    (:func:`recipe_error_gram`), in chunks of rows that bound its memory (about 64 MB)."""
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
                         row_step=pre.grid.step, degree=pre.degree)  # type: ignore[attr-defined]
-    per_dof = regressor_error_gram(model, st, noise, friction, qdd=rows.qdd)
-    return kind_grams(per_dof)
+    index = np.asarray(index)
+    j, d = pre.angles.shape[1], int(getattr(model, "n_dof", 3))  # type: ignore[attr-defined]
+    chunk = max(256, int(8e6 // (2 * j * d * len(model.parameter_names(friction)))))  # type: ignore[attr-defined]
+    out, used = 0.0, None
+    for k in range(0, max(index.size, 1), chunk):
+        rows = pre.take(index[k:k + chunk])  # type: ignore[attr-defined]
+        gram, used = recipe_error_gram(model, rows, noise, friction, used=used)
+        out = out + gram
+    return kind_grams(out)  # type: ignore[arg-type]
+
+
+def _turning_channels(model: object, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """The angle channels the units' constraint rows (odometry) depend on, found on a few
+    rows (the steering angles and pivots; not the wheels')."""
+    from ropod_sysid.odometry import constraint_system
+
+    few = min(8, angles.shape[0])
+    base = constraint_system(model, angles[:few], rates[:few])  # type: ignore[arg-type]
+    out = []
+    for c in range(angles.shape[1]):
+        moved = angles[:few].copy()
+        moved[:, c] += 0.1
+        new = constraint_system(model, moved, rates[:few])  # type: ignore[arg-type]
+        if any(np.any(x != y) for x, y in zip(base, new, strict=True)):
+            out.append(c)
+    return np.array(out, int)
+
+
+def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.ndarray,
+                  eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """How the angle channels' errors reach the world-frame q̇ and q̈ (N, D) of the rows
+    through odometry: M (N, D, J), δq̇ = M δφ̇ and δq̈ = M δφ̈ + K δφ̇, with K (N, D, J).
+    M = [R(θ) G; E] (G the odometry gain :func:`odometry_gain`, E the selection of the units'
+    own coordinates); K from q̈ = R (ν̇ + ω × ν) with ν = G(φ) φ̇: ν̇ = G φ̈ + Ġ φ̇, so a
+    rate error δφ̇_j moves q̈ by R (Ġ e_j + ∂(G φ̇)/∂φ_j + δω × ν + ω × G e_j) — the wheels'
+    rolling rows turn with the steering angles, so a steering angle's rate error reaches q̈
+    with about the wheel speed as gain (Ġ by differences along φ̇, ∂/∂φ_j by differences)."""
+    from ropod_sysid.odometry import constraint_system, solve_symmetric3
+
+    n, j = angles.shape
+    d = int(getattr(model, "n_dof", 3))
+
+    def gain(ang: np.ndarray) -> np.ndarray:  # G (J, N, 3) at the angles (N, J)
+        c, _ = constraint_system(model, ang, np.zeros((n, j)))  # type: ignore[arg-type]
+        _, b = constraint_system(model, np.tile(ang, (j, 1)),  # type: ignore[arg-type]
+                                 np.repeat(np.eye(j), n, axis=0))
+        ct = np.swapaxes(c, 1, 2)
+        rhs = ct @ np.moveaxis(b.reshape(j, n, -1), 0, 2)  # (N, 3, J): Cᵀ D
+        return np.moveaxis(np.linalg.solve(ct @ c, rhs), 2, 0)
+
+    g = gain(angles)
+    g_dot = (gain(angles + eps * rates) - g) / eps  # Ġ: along the angles' motion
+    nu = np.einsum("cni,nc->ni", g, rates)
+    body = g_dot.copy()  # (J, N, 3): ∂ν̇/∂φ̇_c
+    turning = _turning_channels(model, angles, rates)
+    if turning.size:  # ∂(G φ̇)/∂φ_c of the channels the constraint rows turn with
+        t = turning.size
+        ang = np.tile(angles, (t, 1)).reshape(t, n, j)
+        ang[np.arange(t), :, turning] += eps
+        c, b = constraint_system(model, ang.reshape(t * n, j), np.tile(rates, (t, 1)))  # type: ignore[arg-type]
+        ct = np.swapaxes(c, 1, 2)
+        moved = solve_symmetric3(ct @ c, (ct @ b[..., None])[..., 0]).reshape(t, n, 3)
+        body[turning] += (moved - nu) / eps
+    w, gw = nu[:, 2], g[:, :, 2]  # ω and δω per channel
+    body[:, :, 0] -= gw * nu[:, 1] + w * g[:, :, 1]
+    body[:, :, 1] += gw * nu[:, 0] + w * g[:, :, 0]
+    c, s = np.cos(q[:, 2]), np.sin(q[:, 2])
+    m, k = np.zeros((n, d, j)), np.zeros((n, d, j))
+    for out, v in ((m, g), (k, body)):
+        out[:, 0] = (c * v[:, :, 0] - s * v[:, :, 1]).T
+        out[:, 1] = (s * v[:, :, 0] + c * v[:, :, 1]).T
+        out[:, 2] = v[:, :, 2].T
+    own = np.asarray(getattr(model, "coordinate_channels", np.zeros(0, int)), int)
+    m[:, 3 + np.arange(own.size), own] = 1.0
+    return m, k
+
+
+def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
+                      friction: str = "per-wheel", h: float = 1e-6,
+                      used: list[int] | None = None) -> tuple[np.ndarray, list[int]]:
+    """E[δA_dᵀ δA_d] (D, p, p) summed over the rows ``rows`` (a :class:`Preprocessed` of the
+    row samples), per row d: each encoder channel's rate and acceleration errors (odd and even
+    kernels: uncorrelated; :func:`channel_variances`) carried through the fit's recipe
+    (:func:`ropod_sysid.regressor.raw_system`) to first order:
+
+    * odometry (:func:`odometry_maps`): δq̇ = M δφ̇, δq̈ = M δφ̈ + K δφ̇;
+    * :meth:`~ropod_sysid.model.PlatformModel.consistent_motion`: δq̇ ← P_v δq̇ (its own
+      coordinates' rates with it) and δq̈ ← P_a δq̈ − G⁺ δ(Ġ q̇), P = I − G⁺G, where the rows are
+      regular (elsewhere unchanged);
+    * A_ID,ext, linear in q̈ (A = A₀ + Σ_k A_k q̈_k: D + 1 evaluations) and through the state
+      along the base twist and the rate channels A or Ġ q̇ use (the units' own coordinates,
+      the swivel's pivots; differences of step ``h``);
+    * the held joints locked, the identification projector (the base rows left out near
+      singular configurations) and the rows at rest zero, as the fit forms them.
+
+    Without constraints the projections are the identity. ``used``: the rate channels A or
+    Ġ q̇ reads (None: found on a few rows); returned with the gram, for the next rows.
+    (Second-order terms — the angles' own errors in A's angle-dependent columns — are left
+    out.)"""
+    from ropod_sysid.model.assembly import SINGULAR_MARGIN, base_singular_ratio
+    from ropod_sysid.regressor import at_rest, held_joints
+
+    n, j = rows.angles.shape  # type: ignore[attr-defined]
+    d = int(getattr(model, "n_dof", 3))
+    enc = _encoders(model, j)
+    own = np.asarray(getattr(model, "coordinate_channels", np.zeros(0, int)), int)
+    rates = rows.angle_rates  # type: ignore[attr-defined]
+    st_m = model.state(rows.q, rows.qd, rows.angles, rates)  # type: ignore[attr-defined]
+    st, qdd = model.consistent_motion(st_m, rows.qdd)  # type: ignore[attr-defined]
+    if d > 3:
+        st.held = held_joints(model, rates[:, own])  # type: ignore[arg-type]
+    eye = np.broadcast_to(np.eye(d), (n, d, d))
+    con = model.constraints(st_m)  # type: ignore[attr-defined]
+    if con is not None:
+        regular = base_singular_ratio(con[0], model.motion_rank) >= SINGULAR_MARGIN  # type: ignore[attr-defined]
+        p_v = eye - np.linalg.pinv(con[0], rcond=1e-9) @ con[0]
+        g_c, c_c = model.constraints(st)  # type: ignore[attr-defined]
+        g_pinv = np.linalg.pinv(g_c, rcond=1e-9)
+        p_a = eye - g_pinv @ g_c
+        p_v[~regular], p_a[~regular], g_pinv[~regular] = np.eye(d), np.eye(d), 0.0
+    else:
+        p_v = p_a = eye
+    m, k = odometry_maps(model, rows.q, rows.angles, rates)  # type: ignore[attr-defined]
+
+    # A's linear parts in q̈ (before the identification projector, applied once at the end)
+    a0 = model.a_id_ext(st, np.zeros((n, d)), friction, projected=False)  # type: ignore[attr-defined]
+    a_k = np.stack([model.a_id_ext(st, np.broadcast_to(np.eye(d)[i], (n, d)), friction,  # type: ignore[attr-defined]
+                                   projected=False) - a0 for i in range(d)], axis=1)
+    a_c = a0 + (qdd[:, None, :] @ a_k.reshape(n, d, -1)).reshape(a0.shape)
+
+    # the state's directions: the base twist and the rate channels A or Ġ q̇ reads
+    if used is None:
+        used = sorted(set(own.tolist()) | set(measured_rate_channels(model, st, qdd, friction)))
+    qd_m = p_v @ m  # (N, D, J): δq̇ after the consistent motion's projection
+    t_map = np.zeros((n, 3 + len(used), j))  # the rate errors' moves along the directions
+    t_map[:, :3] = qd_m[:, :3]
+    da, dc = [], []
+    for i in range(3 + len(used)):
+        qd_i, rates_i = st.qd.copy(), st.angle_rate.copy()  # type: ignore[attr-defined]
+        if i < 3:
+            qd_i[:, i] += h
+        else:
+            ch = used[i - 3]
+            rates_i[:, ch] += h
+            where = np.flatnonzero(own == ch)
+            if where.size:
+                t_map[:, i] = qd_m[:, 3 + where[0]]
+            else:
+                t_map[:, i, ch] = 1.0
+        st_i = model.state(st.q, qd_i, st.angles, rates_i)  # type: ignore[attr-defined]
+        da.append((model.a_id_ext(st_i, qdd, friction, projected=False) - a_c) / h)  # type: ignore[attr-defined]
+        if con is not None:
+            dc.append((model.constraints(st_i)[1] - c_c) / h)  # type: ignore[attr-defined]
+    proj = model.identification_projector(st)  # type: ignore[attr-defined]
+    da_all = np.concatenate([a_k, np.stack(da, axis=1)], axis=1)  # (N, D + I, D, p)
+    if proj is not None:
+        da_all = proj[:, None] @ da_all
+    dqdd_v = p_a @ k
+    if con is not None:
+        dqdd_v = dqdd_v - g_pinv @ (np.stack(dc, axis=-1) @ t_map)
+    # the sources' coefficients on A's terms: (N, D + I, 2J), rate errors then acceleration
+    coef = np.concatenate([np.concatenate([dqdd_v, p_a @ m], axis=2),
+                           np.concatenate([t_map, np.zeros_like(t_map)], axis=2)], axis=1)
+    sd = np.concatenate([np.sqrt(channel_variances(noise, rates, 1)),
+                         np.sqrt(channel_variances(noise, rates, 2))], axis=1)
+    sd[:, np.concatenate([~enc, ~enc])] = 0.0  # a leg's extension is no rotary encoder
+    sd[at_rest(rows)] = 0.0  # type: ignore[arg-type]
+    coef = coef * sd[:, None, :]
+    p = da_all.shape[-1]
+    w = np.swapaxes(coef, 1, 2) @ da_all.reshape(n, -1, d * p)  # (N, 2J, D·p)
+    x = np.moveaxis(w.reshape(n, -1, d, p), 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
+    return np.swapaxes(x, 1, 2) @ x, used
 
 
 def kind_grams(per_dof: np.ndarray) -> np.ndarray:

@@ -570,12 +570,13 @@ class PlatformModel:
         return self._columns[friction]
 
     def a_id_ext(self, st: State, qdd: np.ndarray,
-                 friction: Friction = "per-wheel") -> np.ndarray:
+                 friction: Friction = "per-wheel", projected: bool = True) -> np.ndarray:
         """A_ID,ext (N, 3, p) with columns ordered as :func:`parameter_names` (eq. 66).
 
         [A_ID | friction columns]: the base and unit inertial columns (35), then each unit
         type's friction columns (for the swivel: −B_τ A_fw, −B_τfp A_fp, eqs. 56/57, 59/60),
-        or the base's body-axis friction columns.
+        or the base's body-axis friction columns. ``projected`` False: before the
+        :meth:`identification_projector` (which the caller applies once to several).
         """
         check_variant(friction)
         n, d = qdd.shape[0], self.n_dof
@@ -602,7 +603,7 @@ class PlatformModel:
         if friction == "body":
             body = slice(len(names) - len(base.BODY_FRICTION), len(names))
             out[:, :3, body] = base.body_friction_columns(st.q[:, 2], st.qd, self.alpha)
-        return self._projected(st, out)
+        return self._projected(st, out) if projected else out
 
     def _projected(self, st: State, rows: np.ndarray) -> np.ndarray:
         """P rows (N, D, …): the constraint forces removed (unchanged without constraints);
