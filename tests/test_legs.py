@@ -378,7 +378,7 @@ def test_cli_simulates_the_planned_legs_and_converts_their_logs(tmp_path: Path) 
 
     from ropod_sysid.cli.main import main
 
-    t = np.linspace(0.0, 0.4, 21)
+    t = np.linspace(0.0, 0.3, 16)
     x = np.clip(t / 0.25, 0.0, 1.0)
     ramp = x**3 * (10 - 15 * x + 6 * x * x)
     rows = ["t,vx,vy,omega,leg_1,leg_2,leg_3,leg_4"]

@@ -119,8 +119,8 @@ def test_current_average_is_the_mean_over_the_log_interval(off_square, truth) ->
     t = np.arange(0.0, 0.41, 0.01)
     run = Setpoints(t, 0.8 * t, 0.3 * t, 1.0 * t)  # speeding up from rest in every direction
     k_t = off_square.torque_constants()
-    fine = simulate(off_square, truth, run, rate=1000.0, engine="numpy")[0]
-    mean = simulate(off_square, truth, run, rate=100.0, engine="numpy",
+    fine = simulate(off_square, truth, run, rate=1000.0, engine="numba")[0]
+    mean = simulate(off_square, truth, run, rate=100.0, engine="numba",
                     sensors=Sensors(current_average=True))[0]
     expect = np.array([fine.tau[max(10 * k - 5, 0):10 * k + 5].mean(axis=0)
                        for k in range(mean.log.t.size)])
