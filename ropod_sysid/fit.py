@@ -421,14 +421,18 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
 
 
 
-CORRECTION_MARGIN = 10.0  # --encoder-counts corrects the directions with AᵀA > this × E[δAᵀδA]
+# --encoder-counts corrects the directions with AᵀA > this × E[δAᵀδA]. Not 10: on the off-square
+# ropod's 37 s runs (rows every sample) the pivots' J_zz,wh direction, the one the encoders bias
+# most (E ≈ 15 % of its AᵀA), sits at 9.0–9.2 and was left uncorrected (typical m_b σ 25 kg,
+# optimised J_zz,wh's bias kept); the barely excited directions this guards are at E ≳ AᵀA.
+CORRECTION_MARGIN = 3.0
 
 
 def corrected_triangle(systems: Sequence[Triangles], weights: Sequence[float]) -> np.ndarray:
     """The stacked triangle of the weighted systems; when they carry the encoders' error gram
     (``--encoder-counts``), of the normal equations corrected for it (corrected least squares:
     AᵀA − E[δAᵀδA], Aᵀb unchanged; errors of A shrink a plain fit's values,
-    :mod:`ropod_sysid.noise`), refactored by :func:`gram_triangle`. E is applied in the
+    :mod:`ropod_sysid.noise`), refactored by :func:`corrected_factor`. E is applied in the
     eigen-directions of the column-scaled AᵀA that exceed :data:`CORRECTION_MARGIN` × E's
     share in them, not in those the logs barely determine."""
     r = stack_triangles([s.weighted(w) for s, w in zip(systems, weights, strict=True)])
@@ -455,7 +459,29 @@ def corrected_triangle(systems: Sequence[Triangles], weights: Sequence[float]) -
         raise InputError("--encoder-counts: the correction for the encoders' errors is larger "
                          "than the motion in the logs can carry (the corrected normal equations "
                          "lose rank); check the counts, or fit without it")
-    return gram_triangle(gram)
+    return corrected_factor(gram, d)
+
+
+def corrected_factor(gram: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The triangle [[R, R⁻ᵀAᵀb], [0, ρ]] of corrected normal equations ``gram`` ((p+1, p+1):
+    AᵀA − E, Aᵀb, bᵀb) with column scales ``d`` (p,). R comes from
+    the column-scaled AᵀA − E alone (:func:`gram_triangle`, then unscaled), so that the fit
+    solves (AᵀA − E) m = Aᵀb, and ρ² = bᵀb − bᵀA (AᵀA − E)⁻¹ Aᵀb = ‖b − A m‖² − mᵀE m (the
+    residual less the encoders' share: the corrected σ̂², the delay search's cost), clipped at
+    0. Not an eigen-factor of the whole (p+1)² matrix: that is indefinite when mᵀE m exceeds
+    the residual, and clipping its negative eigenvalue moves Aᵀb and AᵀA with it (on the
+    off-square ropod's 37 s typical run, rows every sample: m_b ≈ 0 for 35.1 kg)."""
+    p = d.size
+    scaled = gram[:p, :p] / np.outer(d, d)
+    r_s = gram_triangle(scaled)  # r_sᵀ r_s = scaled, semi-definite: its null space kept
+    rhs = gram[:p, p] / d
+    x = np.linalg.lstsq(r_s.T, rhs, rcond=None)[0]
+    resid = float(gram[p, p] - x @ x)
+    out = np.zeros_like(gram)
+    out[:p, :p] = r_s * d[None, :]
+    out[:p, p] = x
+    out[p, p] = math.sqrt(max(resid, 0.0))
+    return out
 
 
 def weighted_stretches(systems: Sequence[Triangles], weights: Sequence[float],

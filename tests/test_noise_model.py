@@ -265,3 +265,28 @@ def test_the_encoders_error_gram_matches_the_measured_one_on_a_constrained_platf
     corrected = fit_logs([quantised], pf, FitOptions(encoder_counts=2**14)).solution
     j = ref.names.index("Jzz_b")
     assert abs(corrected.values[j] - ref.values[j]) < 0.5 * abs(plain.values[j] - ref.values[j])
+
+
+def test_the_corrected_triangle_solves_the_corrected_equations_when_they_are_indefinite():
+    """When mᵀE m exceeds the residual (a log without current noise), [AᵀA − E, Aᵀb; bᵀA, bᵀb]
+    is indefinite; its triangle (:func:`ropod_sysid.fit.corrected_factor`) still solves
+    (AᵀA − E) m = Aᵀb, columns of very different scales included, with ρ clipped at 0 (an
+    eigen-factor of the whole matrix moved the solution: the off-square ropod's m_b ≈ 0)."""
+    from ropod_sysid.fit import corrected_factor
+    from ropod_sysid.solve import solve
+
+    rng = np.random.default_rng(3)
+    scale = np.array([1.0, 1e3, 1e-2, 30.0])
+    a = rng.normal(size=(400, 4)) * scale
+    m = np.array([2.0, -1e-3, 50.0, 0.1])
+    b = a @ m + rng.normal(scale=1e-3, size=400)
+    e = 0.05 * np.diag(np.diag(a.T @ a))  # the encoders' share: far above the residual
+    gram = np.column_stack([a, b]).T @ np.column_stack([a, b])
+    gram[:4, :4] -= e
+    assert np.linalg.eigvalsh(gram).min() < 0
+    r = corrected_factor(gram, np.sqrt(np.diag(a.T @ a)))
+    want = np.linalg.solve(gram[:4, :4], gram[:4, 4])
+    sol = solve(r, 400, ["p0", "p1", "p2", "p3"])
+    np.testing.assert_allclose(sol.values, want, rtol=1e-9)
+    np.testing.assert_allclose(r[:4, :4].T @ r[:4, :4], gram[:4, :4], rtol=1e-9, atol=1e-9)
+    assert r[4, 4] == 0.0
