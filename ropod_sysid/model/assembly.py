@@ -32,31 +32,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ropod_sysid.model import base
+from ropod_sysid.model.blocks import cells, gather, placed, spot, take
 from ropod_sysid.model.units import FrictionVariant, UnitData, check_variant
 from ropod_sysid.params import Friction, parameter_names
 
 if TYPE_CHECKING:
     from ropod_sysid.platform import Group, Platform
-
-
-def _whole(idx: np.ndarray, size: int) -> bool:
-    """Are the indices ``idx`` 0, 1, …, size − 1 (a group that is the whole platform)? (A
-    byte comparison: the check runs several times per evaluation of the dynamics.)"""
-    return idx.size == size and idx.tobytes() == np.arange(size, dtype=idx.dtype).tobytes()
-
-
-def _gather(parts: list[tuple[np.ndarray, np.ndarray]], size: int, axis: int) -> np.ndarray:
-    """Per-group arrays (indices, values) placed at their indices along ``axis``."""
-    if len(parts) == 1 and _whole(parts[0][0], size):
-        return parts[0][1]
-    shape = list(parts[0][1].shape)
-    shape[axis] = size
-    out = np.empty(shape)
-    for idx, values in parts:
-        sl = [slice(None)] * len(shape)
-        sl[axis] = idx  # type: ignore[call-overload]
-        out[tuple(sl)] = values
-    return out
 
 
 RANK_TOLERANCE = 1e-9  # singular values of G below this × the largest count as zero
@@ -155,25 +136,6 @@ def base_singular_ratio(g: np.ndarray, regular: int | None = None) -> np.ndarray
     return base[:, regular - 1] / np.maximum(base[:, 0], np.finfo(float).tiny)
 
 
-def _rows(values: np.ndarray, idx: np.ndarray, size: int, axes: tuple[int, ...] = (1,)
-          ) -> np.ndarray:
-    """A group's rows (its base rows, then its own coordinates') placed at ``idx`` of ``size``
-    along each of ``axes``; zeros elsewhere."""
-    if values.shape[axes[0]] == size and _whole(idx, size):
-        return values
-    shape = list(values.shape)
-    for ax in axes:
-        shape[ax] = size
-    out = np.zeros(shape)
-    sl: list[object] = [slice(None)] * len(shape)
-    if len(axes) == 1:
-        sl[axes[0]] = idx
-        out[tuple(sl)] = values  # type: ignore[index]
-    else:
-        out[:, idx[:, None], idx[None, :]] = values
-    return out
-
-
 @dataclass
 class State:
     """Kinematic data of the whole platform at N samples (pinocchio's "data")."""
@@ -194,21 +156,21 @@ class State:
     @property
     def b_tau(self) -> np.ndarray:
         """B_τ (N, D, A) over every actuator (eq. 32)."""
-        return _gather([(g.currents, _rows(d.b_tau, r, self.n_dof))
+        return gather([(g.currents, placed(d.b_tau, r, self.n_dof))
                         for g, d, r in zip(self.groups, self.units, self.rows, strict=True)],
                        self.n_actuators, 2)
 
     @property
     def angle_rate(self) -> np.ndarray:
         """Rates of the unit angles (N, J)."""
-        return _gather([(g.angles, d.angle_rate) for g, d in zip(self.groups, self.units,
+        return gather([(g.angles, d.angle_rate) for g, d in zip(self.groups, self.units,
                                                                 strict=True)],
                        self.n_angles, 1)
 
     @property
     def actuator_rate(self) -> np.ndarray:
         """Rates of the actuated joints (N, A)."""
-        return _gather([(g.currents, d.actuator_rate) for g, d in zip(self.groups, self.units,
+        return gather([(g.currents, d.actuator_rate) for g, d in zip(self.groups, self.units,
                                                                      strict=True)],
                        self.n_actuators, 1)
 
@@ -286,13 +248,13 @@ class PlatformModel:
         qd = qd[:, :3]
         units = []
         for (g, unit), rows in zip(self.groups, self.rows, strict=True):
-            rates = None if angle_rates is None else _take(angle_rates, g.angles, 1)
+            rates = None if angle_rates is None else take(angle_rates, g.angles, 1)
             if rows.size > 3:
                 coord = None if own is None else own[:, rows[3:] - 3]
-                units.append(unit.kinematics(q, qd, _take(angles, g.angles, 1), rates,
+                units.append(unit.kinematics(q, qd, take(angles, g.angles, 1), rates,
                                              coordinate_rates=coord))
             else:
-                units.append(unit.kinematics(q, qd, _take(angles, g.angles, 1), rates))
+                units.append(unit.kinematics(q, qd, take(angles, g.angles, 1), rates))
         return State(q, qd, angles, units, tuple(g for g, _ in self.groups),
                      self.layout.n_angles, self.layout.n_currents, self.rows, self.n_dof)
 
@@ -309,7 +271,7 @@ class PlatformModel:
                  if hasattr(unit, "constraint_jacobian")]
         rows = [r for (_, unit), r in zip(self.groups, self.rows, strict=True)
                 if hasattr(unit, "constraint_jacobian")]
-        g = np.concatenate([_rows(p[0], r, self.n_dof, (2,)) for p, r in zip(parts, rows,
+        g = np.concatenate([placed(p[0], r, self.n_dof, (2,)) for p, r in zip(parts, rows,
                                                                            strict=True)],
                            axis=1)
         c = np.concatenate([p[1] for p in parts], axis=1)
@@ -377,16 +339,16 @@ class PlatformModel:
     def angle_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Rates of the unit angles implied by the base motion (N, J) (for the swivel: δ̇ of
         eq. 8a and φ̇ of eq. 11)."""
-        parts = [(g.angles, u.angle_rates(q, qd, _take(angles, g.angles, 1)))
+        parts = [(g.angles, u.angle_rates(q, qd, take(angles, g.angles, 1)))
                  for g, u in self.groups]
-        return _gather(parts, self.layout.n_angles, 1)
+        return gather(parts, self.layout.n_angles, 1)
 
     def actuator_rates(self, q: np.ndarray, qd: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """Actuator rates (N, A) that the base motion (q, qd) asks for at the unit angles: the
         inverse kinematics a velocity controller uses."""
-        parts = [(g.currents, u.actuator_rates(q, qd, _take(angles, g.angles, 1)))
+        parts = [(g.currents, u.actuator_rates(q, qd, take(angles, g.angles, 1)))
                  for g, u in self.groups]
-        return _gather(parts, self.layout.n_currents, 1)
+        return gather(parts, self.layout.n_currents, 1)
 
     @property
     def planned_columns(self) -> list[str]:
@@ -434,7 +396,7 @@ class PlatformModel:
                           twist[:, 2]], axis=-1)
         rates, errors = [], []
         for i, (g, u) in enumerate(self.groups):
-            ang = _take(angles, g.angles, 1)
+            ang = take(angles, g.angles, 1)
             if hasattr(u, "controller_setpoints"):
                 plan = None if plans is None or plans[i] is None else tuple(
                     p[step] for p in plans[i])  # type: ignore[union-attr]
@@ -444,12 +406,12 @@ class PlatformModel:
             rates.append((g.currents, r))
             errors.append((g.currents, np.full_like(r, np.nan) if e is None else e))
         n_a = self.layout.n_currents
-        return _gather(rates, n_a, 1), _gather(errors, n_a, 1)
+        return gather(rates, n_a, 1), gather(errors, n_a, 1)
 
     def initial_angles(self, twist: np.ndarray) -> np.ndarray:
         """Unit angles (J,) at rest before a first motion with base-frame twist (3,)."""
         parts = [(g.angles, u.initial_angles(twist)[None]) for g, u in self.groups]
-        return _gather(parts, self.layout.n_angles, 1)[0]
+        return gather(parts, self.layout.n_angles, 1)[0]
 
     # ------------------------------------------------------------ dynamics
     def friction(self, st: State, params: object, friction: Friction = "per-wheel"
@@ -462,26 +424,26 @@ class PlatformModel:
             parts.append((g.currents, unit.friction_torques(data, params, friction)))
             f = unit.friction_force(data, params, friction)
             if f is not None:  # on the base rows, or on the group's rows (a leg's friction)
-                f = _rows(f, rows if f.shape[1] == rows.size else np.arange(3), self.n_dof)
+                f = placed(f, rows if f.shape[1] == rows.size else np.arange(3), self.n_dof)
                 f_f = f if f_f is None else f_f + f
         if friction == "body":
-            f = _rows(base.body_friction_force(st.q[:, 2], st.qd, params, self.alpha),
+            f = placed(base.body_friction_force(st.q[:, 2], st.qd, params, self.alpha),
                       np.arange(3), self.n_dof)
             f_f = f if f_f is None else f_f + f
-        return _gather(parts, self.layout.n_currents, 1), f_f
+        return gather(parts, self.layout.n_currents, 1), f_f
 
     def direct_eom(self, st: State, params: object,
                    friction: Friction = "per-wheel") -> DirectEOM:
         """M_dir, B_Fb, B_τ, b_dir and the friction terms (eqs. 32, 64, 65)."""
         n, d = st.q.shape[0], self.n_dof
-        m_dir = _rows(base.m_b(params["m_b"], params["Jzz_b"], n), np.arange(3), d, (1, 2))
+        m_dir = placed(base.m_b(params["m_b"], params["Jzz_b"], n), np.arange(3), d, (1, 2))
         b_dir = np.zeros((n, d))  # (49): M_dir = M_b + Σ M_i,add
         for (_, unit), data, rows in zip(self.groups, st.units, self.rows, strict=True):
             m_add, b_add = unit.mass_terms(data, params)
-            m_dir = m_dir + _rows(m_add, rows, d, (1, 2))
-            b_dir = b_dir + _rows(b_add, rows, d)
+            m_dir = m_dir + placed(m_add, rows, d, (1, 2))
+            b_dir = b_dir + placed(b_add, rows, d)
         tau_f, f_f = self.friction(st, params, friction)
-        return DirectEOM(m_dir, _rows(base.b_fb(st.q[:, 2]), np.arange(3), d), st.b_tau, b_dir,
+        return DirectEOM(m_dir, placed(base.b_fb(st.q[:, 2]), np.arange(3), d), st.b_tau, b_dir,
                          tau_f, f_f)
 
     def forward_dynamics(self, st: State, params: object, tau: np.ndarray,
@@ -569,8 +531,8 @@ class PlatformModel:
             index = {n: i for i, n in enumerate(self.parameter_names(friction))}
             spots = []
             for g, unit in self.groups:
-                spots.append((_spot([index[n] for n in g.type.inertial_names]),
-                              _spot([index[n] for n in g.type.friction_names(unit.names,
+                spots.append((spot([index[n] for n in g.type.inertial_names]),
+                              spot([index[n] for n in g.type.friction_names(unit.names,
                                                                              friction)])))
             self._columns[friction] = spots
         return self._columns[friction]
@@ -595,13 +557,13 @@ class PlatformModel:
                                                         self.rows, strict=True):
             own = rows.size > 3
             if own:
-                out[(slice(None), *_cells(rows, inert))] += unit.a_id(data, qdd[:, rows])
+                out[(slice(None), *cells(rows, inert))] += unit.a_id(data, qdd[:, rows])
             else:
                 out[:, :3, inert] += unit.a_id(data, qdd[:, :3])
             if friction == "body" and not own:
                 continue
             if own:
-                out[(slice(None), *_cells(rows, fric))] += unit.friction_columns(data, friction)
+                out[(slice(None), *cells(rows, fric))] += unit.friction_columns(data, friction)
             elif isinstance(fric, slice) and fric not in shared:
                 unit.friction_columns(data, friction, out=out[:, :3, fric])
             else:
@@ -686,25 +648,3 @@ def _symmetric_pinv(s: np.ndarray, rcond: float) -> np.ndarray:
     keep = lam > rcond * np.max(lam, axis=-1, keepdims=True)
     inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
     return np.einsum("nij,nj,nkj->nik", vec, inv, vec)
-
-
-def _take(values: np.ndarray, idx: np.ndarray, axis: int) -> np.ndarray:
-    """``values`` at ``idx`` along ``axis``; the array itself when ``idx`` covers it all."""
-    values = np.asarray(values, float)
-    if _whole(idx, values.shape[axis]):
-        return values
-    return np.take(values, idx, axis=axis)
-
-
-def _cells(rows: np.ndarray, cols: np.ndarray | slice) -> tuple[np.ndarray, ...] | tuple:
-    """Index of the block rows × cols of an (N, D, p) array (after its sample axis)."""
-    if isinstance(cols, slice):
-        return rows, cols
-    return rows[:, None], cols[None, :]
-
-
-def _spot(idx: list[int]) -> np.ndarray | slice:
-    """Column indices as a slice when they are consecutive (writes in place), else an array."""
-    if idx and idx == list(range(idx[0], idx[0] + len(idx))):
-        return slice(idx[0], idx[0] + len(idx))
-    return np.array(idx, int)
