@@ -420,7 +420,6 @@ def fit_systems(systems: Sequence[Triangles], names: Sequence[str], options: Fit
     return sol, weights
 
 
-
 # --encoder-counts corrects the directions with AᵀA > this × E[δAᵀδA]. Not 10: on the off-square
 # ropod's 37 s runs (rows every sample) the pivots' J_zz,wh direction, the one the encoders bias
 # most (E ≈ 15 % of its AᵀA), sits at 9.0–9.2 and was left uncorrected (typical m_b σ 25 kg,
