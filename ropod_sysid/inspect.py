@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import GAP_RULE, check_times
@@ -211,6 +210,8 @@ def _base_velocity(log: Log, model: PlatformModel, t: np.ndarray, dt_med: float,
     rates = np.gradient(angles, t, axis=0)
     w = max(1, int(round(0.05 / dt_med))) if dt_med > 0 else 1
     if w > 1:
+        from scipy.ndimage import uniform_filter1d  # (0.4-0.8 s to import: only here)
+
         rates = uniform_filter1d(rates, w, axis=0, mode="nearest")
     vel = base_twist(model, angles, rates)
     moving = (np.hypot(vel[:, 0], vel[:, 1]) > c.moving_speed) | \

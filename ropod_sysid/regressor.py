@@ -675,12 +675,12 @@ def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per
     tri: Triangles | None = None
     per = pre.grid.stretch_rows(pre.dt)
     for idx, a, b in system(model, pre, friction, chunk):
-        block = block_triangles(a, b, pre.source, (int(idx[0]) - pre.trim) // pre.grid.step,
-                                per)
+        row0 = (int(idx[0]) - pre.trim) // pre.grid.step
+        block = block_triangles(a, b, pre.source, row0, per)
         if encoder_counts:
             from ropod_sysid.noise import fit_error_gram
 
-            block.error_gram = fit_error_gram(model, pre, idx, encoder_counts, friction)
+            block.error_gram = fit_error_gram(model, pre, idx, encoder_counts, friction, row0)
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")

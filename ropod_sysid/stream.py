@@ -90,6 +90,7 @@ from ropod_sysid.regressor import (
     smooth,
     smoother_note,
 )
+from ropod_sysid.signals import butter2_lowpass
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
     FORCE_THRESHOLD,
@@ -167,7 +168,6 @@ class _Blocks:
         self.tri: Triangles | None = None
         self.odo: OdometryState | None = None
         self.obs = ObserverStats() if params is not None else None
-        self.zi: np.ndarray | None = None
         # the rows of block i are reduced in a worker thread while block i+1 is smoothed (numpy
         # releases the GIL in its loops); one worker keeps the merge order of the triangles
         self.worker = (ThreadPoolExecutor(1, thread_name_prefix="ropod-sysid-rows")
@@ -190,11 +190,8 @@ class _Blocks:
         self.s = self.trim  # next kept sample to reduce
         self.lookback, self.lookahead = delay_reach(self.delay, dt)
         if self.params is not None:
-            from scipy import signal as _signal  # slow to import; only the observer needs it
-
             self.obs_step = observer_step(dt, self.grid.step)
-            self.sos = _signal.butter(2, float(OBSERVER_CUTOFF_HZ), btype="low",
-                                      fs=1.0 / (dt * self.obs_step), output="sos")
+            self.lowpass = butter2_lowpass(dt * self.obs_step, OBSERVER_CUTOFF_HZ)
             self.m_params = self.params.vector(self.model.parameter_names(self.friction))
 
     def push(self, samples: _Samples) -> None:
@@ -316,14 +313,14 @@ class _Blocks:
             rows = first + self.grid.step * np.arange(count)
             self.gather.push_rows(pre.t[rows], a, b, pre.qd[rows], pre.q[rows], pre.qdd[rows],
                                   pre.angles[rows], pre.angle_rates[rows], pre.tau[rows])
-        block = block_triangles(a, b, self.source, (pa + first - self.trim) // self.grid.step,
-                                self.grid.stretch_rows(self.dt))
+        row0 = (pa + first - self.trim) // self.grid.step  # the log's row number of the first
+        block = block_triangles(a, b, self.source, row0, self.grid.stretch_rows(self.dt))
         if self.encoder_counts:
             from ropod_sysid.noise import fit_error_gram
 
             rows = first + self.grid.step * np.arange(count)
             block.error_gram = fit_error_gram(self.model, pre, rows, self.encoder_counts,
-                                              self.friction)
+                                              self.friction, row0)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
@@ -337,11 +334,7 @@ class _Blocks:
         at = row_inputs(pre, idx - pa, step)
         st = self.model.state(at.q, at.qd, at.angles, at.angle_rates)
         f_b = self.model.disturbance(st, self.params, at.qdd, at.tau, self.friction)
-        if self.zi is None:
-            self.zi = np.zeros((self.sos.shape[0], 2, f_b.shape[1]))
-        from scipy import signal as _signal
-
-        f_hat, self.zi = _signal.sosfilt(self.sos, f_b, axis=0, zi=self.zi)
+        f_hat = self.lowpass(f_b)
         keep = (idx >= self.trim) & ((idx < ob - self.trim) if last else True)
         f_hat, t_kept = f_hat[keep], at.t[keep]
         obs = self.obs

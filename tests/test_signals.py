@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from ropod_sysid.signals import (
+    butter2_lowpass,
     central_difference,
     five_point_difference,
     is_uniform,
@@ -385,6 +386,29 @@ def test_lowpass_passes_1hz_attenuates_50hz(zero_phase: bool) -> None:
         np.testing.assert_allclose(out[steady, 0], slow[steady], atol=0.01)
     with pytest.raises(ValueError):
         lowpass(y, dt, 600.0)
+
+
+@pytest.mark.parametrize("dt, cutoff", [(0.01, 10.0), (0.001, 10.0), (0.002, 240.0)])
+def test_butter2_is_scipys_butterworth_and_filters_in_chunks_as_sosfilt(dt: float,
+                                                                          cutoff: float) -> None:
+    """The observer's low-pass without scipy.signal's import: the closed-form coefficients
+    are scipy.signal.butter's, and a signal filtered in chunks (of 0, 1, 2 and more samples,
+    the state carried between them) is sosfilt's of the whole, to 1e-13 relative."""
+    from scipy import signal
+
+    f = butter2_lowpass(dt, cutoff)
+    b, a = signal.butter(2, cutoff, fs=1.0 / dt)
+    np.testing.assert_allclose(f.b, b, rtol=1e-12)
+    np.testing.assert_allclose(f.a, a, rtol=1e-12, atol=1e-15)
+    x = np.random.default_rng(2).normal(size=(700, 3, 2)).cumsum(axis=0)
+    edges = [0, 1, 1, 3, 4, 250, 700]
+    y = np.concatenate([f(x[i:j]) for i, j in zip(edges[:-1], edges[1:], strict=True)])
+    want = signal.sosfilt(signal.butter(2, cutoff, fs=1.0 / dt, output="sos"), x, axis=0)
+    np.testing.assert_allclose(y, want, rtol=0, atol=1e-13 * np.abs(want).max())
+    np.testing.assert_allclose(lowpass(np.moveaxis(x, 0, 1), dt, cutoff, axis=1),
+                               np.moveaxis(want, 0, 1), rtol=0, atol=1e-13 * np.abs(want).max())
+    with pytest.raises(ValueError, match=r"cutoff_hz must be in \(0, 50\) Hz for dt = 0.01 s"):
+        butter2_lowpass(0.01, 50.0)
 
 
 @pytest.mark.parametrize("k", [61, 101])
