@@ -14,32 +14,34 @@ predicted b_ID = A_ID,ext m; σ̂² follows from the sensors, traced through the
 * **encoder quantisation**, 2π/counts per count, uniform: σ_φ² = (2π/counts)² / 12 per angle
   and sample while the angle moves a count per sample or more (a slower angle steps rarely: its
   error is a sampled sawtooth, :func:`sawtooth_share`). The angles are smoothed (LOESS of k
-  samples), the pose follows by odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from
-  the units' constraint rows C ν = D φ̇), and two central differences give q̈: the acceleration
-  error is R(θ) G (g_q ⊛ e) / dt² (g_q the smoother and the two differences), which enters the
-  rows as M_dir δq̈ (the acceleration terms of A_ID,ext m) and passes the rows' LOESS with
-  them.
+  samples) and differenced (odd kernel to φ̇, even to φ̈: uncorrelated), the pose follows by
+  odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from the units' constraint rows
+  C ν = D φ̇), and each channel's rate and acceleration errors reach the rows through the fit's
+  own recipe (:func:`recipe_sensitivities`: odometry's q̇ and q̈ including the steering rates'
+  term, the projection onto the allowed motions, the held joints, the identification projector,
+  the rows at rest), then pass the rows' LOESS with them. A row's error is δA m; its variance
+  Σ_s (W_s m)² over the sources s.
 
 Both are white per sample before the filters, so a row carries σ² ‖g‖² of each, g the whole
 kernel from the samples to the row. σ̂² is the mean over rows and DOFs of the weighted
 variances; the fit's c is 1/Σh_r² of the rows' kernel h_r.
 
-The errors of q̈ also sit in A_ID,ext itself (errors in the variables), and a least-squares fit
-shrinks the columns they blur: E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m, with E[δAᵀδA] from
-∂A/∂q̈ (A is linear in q̈) and the covariance of q̈'s errors, and from ∂A/∂φ̇ for the measured
-angle rates a type uses (the swivel's δ̇). What ``fit --encoder-counts`` subtracts
-(:func:`fit_error_gram`) carries each encoder's errors through the fit's own recipe instead
-(:func:`recipe_error_gram`: the steering rates' term of the odometry's q̈, the projection onto
-the allowed motions, the held joints and the rows at rest, which the planned rows here leave
-out); measured against the quantised − exact rows of steered-swivel and legs-exact, its
-inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65, cause not found).
-Through the swivel's caster offset the pivots' acceleration carries q̈ / d, so the unit-inertia
-columns carry q̈'s errors a hundredfold: this bias, not σ, limits a run that a white-noise
-criterion calls excellent. It does not shrink with the run's length. (Measured, 20 seeds: on
-the 37 s typical and optimised runs of the off-square ropod the predicted and the fits' mean
-errors agree within 1–7 %; on the 30 s typical run they do not — −1.8 kg predicted for m_b,
-+0.7 ± 0.3 kg fitted — for a reason not found.) The errors of A's angle-dependent columns are
-second order and left out.
+The errors of q̈ and of the measured rates also sit in A_ID,ext itself (errors in the
+variables), and a least-squares fit shrinks the columns they blur:
+E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m. E[δAᵀδA] = Σ_s W_sᵀ W_s is formed once, by
+:func:`recipe_error_gram`, for both sides: what ``fit --encoder-counts`` subtracts from a log's
+normal equations (:func:`fit_error_gram`) and what ``trajectory check`` and ``optimize`` predict
+for a planned run (:func:`planned_rows`: the same recipe at the planned states; on the same rows
+the two grams are equal). Measured against the quantised − exact rows of steered-swivel and
+legs-exact, its inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65,
+cause not found); the base rows' variance of δA m on steered-swivel within 0.77–0.84 (the
+steering rows' 0.12–0.24, cause not found). Through the swivel's caster offset the pivots'
+acceleration carries q̈ / d, so the unit-inertia columns carry q̈'s errors a hundredfold: this
+bias, not σ, limits a run that a white-noise criterion calls excellent. It does not shrink with
+the run's length. (Measured, 20 seeds: on the 37 s typical and optimised runs of the off-square
+ropod the predicted and the fits' mean errors agree within 1–7 %; on the 30 s typical run they
+do not — −1.8 kg predicted for m_b, +0.7 ± 0.3 kg fitted — for a reason not found.) The errors
+of A's angle-dependent columns are second order and left out.
 """
 
 from __future__ import annotations
