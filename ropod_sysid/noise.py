@@ -14,32 +14,34 @@ predicted b_ID = A_ID,ext m; σ̂² follows from the sensors, traced through the
 * **encoder quantisation**, 2π/counts per count, uniform: σ_φ² = (2π/counts)² / 12 per angle
   and sample while the angle moves a count per sample or more (a slower angle steps rarely: its
   error is a sampled sawtooth, :func:`sawtooth_share`). The angles are smoothed (LOESS of k
-  samples), the pose follows by odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from
-  the units' constraint rows C ν = D φ̇), and two central differences give q̈: the acceleration
-  error is R(θ) G (g_q ⊛ e) / dt² (g_q the smoother and the two differences), which enters the
-  rows as M_dir δq̈ (the acceleration terms of A_ID,ext m) and passes the rows' LOESS with
-  them.
+  samples) and differenced (odd kernel to φ̇, even to φ̈: uncorrelated), the pose follows by
+  odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from the units' constraint rows
+  C ν = D φ̇), and each channel's rate and acceleration errors reach the rows through the fit's
+  own recipe (:func:`recipe_sensitivities`: odometry's q̇ and q̈ including the steering rates'
+  term, the projection onto the allowed motions, the held joints, the identification projector,
+  the rows at rest), then pass the rows' LOESS with them. A row's error is δA m; its variance
+  Σ_s (W_s m)² over the sources s.
 
 Both are white per sample before the filters, so a row carries σ² ‖g‖² of each, g the whole
 kernel from the samples to the row. σ̂² is the mean over rows and DOFs of the weighted
 variances; the fit's c is 1/Σh_r² of the rows' kernel h_r.
 
-The errors of q̈ also sit in A_ID,ext itself (errors in the variables), and a least-squares fit
-shrinks the columns they blur: E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m, with E[δAᵀδA] from
-∂A/∂q̈ (A is linear in q̈) and the covariance of q̈'s errors, and from ∂A/∂φ̇ for the measured
-angle rates a type uses (the swivel's δ̇). What ``fit --encoder-counts`` subtracts
-(:func:`fit_error_gram`) carries each encoder's errors through the fit's own recipe instead
-(:func:`recipe_error_gram`: the steering rates' term of the odometry's q̈, the projection onto
-the allowed motions, the held joints and the rows at rest, which the planned rows here leave
-out); measured against the quantised − exact rows of steered-swivel and legs-exact, its
-inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65, cause not found).
-Through the swivel's caster offset the pivots' acceleration carries q̈ / d, so the unit-inertia
-columns carry q̈'s errors a hundredfold: this bias, not σ, limits a run that a white-noise
-criterion calls excellent. It does not shrink with the run's length. (Measured, 20 seeds: on
-the 37 s typical and optimised runs of the off-square ropod the predicted and the fits' mean
-errors agree within 1–7 %; on the 30 s typical run they do not — −1.8 kg predicted for m_b,
-+0.7 ± 0.3 kg fitted — for a reason not found.) The errors of A's angle-dependent columns are
-second order and left out.
+The errors of q̈ and of the measured rates also sit in A_ID,ext itself (errors in the
+variables), and a least-squares fit shrinks the columns they blur:
+E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m. E[δAᵀδA] = Σ_s W_sᵀ W_s is formed once, by
+:func:`recipe_error_gram`, for both sides: what ``fit --encoder-counts`` subtracts from a log's
+normal equations (:func:`fit_error_gram`) and what ``trajectory check`` and ``optimize`` predict
+for a planned run (:func:`planned_rows`: the same recipe at the planned states; on the same rows
+the two grams are equal). Measured against the quantised − exact rows of steered-swivel and
+legs-exact, its inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65,
+cause not found); the base rows' variance of δA m on steered-swivel within 0.77–0.84 (the
+steering rows' 0.12–0.24, cause not found). Through the swivel's caster offset the pivots'
+acceleration carries q̈ / d, so the unit-inertia columns carry q̈'s errors a hundredfold: this
+bias, not σ, limits a run that a white-noise criterion calls excellent. It does not shrink with
+the run's length. (Measured, 20 seeds: on the 37 s typical and optimised runs of the off-square
+ropod the predicted and the fits' mean errors agree within 1–7 %; on the 30 s typical run they
+do not — −1.8 kg predicted for m_b, +0.7 ± 0.3 kg fitted — for a reason not found.) The errors
+of A's angle-dependent columns are second order and left out.
 """
 
 from __future__ import annotations
@@ -54,8 +56,8 @@ from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.regressor import DEFAULT_SPAN_S, RowGrid
 
-__all__ = ["SensorNoise", "encoder_variance", "predicted_fit_std", "regressor_error_gram",
-           "row_kernel", "row_variances", "sigma_hat"]
+__all__ = ["MotionRows", "SensorNoise", "encoder_variance", "fit_error_gram", "planned_rows",
+           "predicted_fit_std", "recipe_error_gram", "row_kernel", "row_variances", "sigma_hat"]
 
 
 @dataclass(frozen=True)
@@ -200,19 +202,6 @@ def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int) -> np.n
     return encoder_variance(counts) * float(np.sum(full**2)) * sawtooth_share(full, cps)
 
 
-def odometry_gain(model: object, angles: np.ndarray) -> np.ndarray:
-    """G (N, 3, J): the base-frame twist from the angle rates by the least squares of the
-    units' constraint rows at ``angles`` (N, J), as odometry solves it (linear in the rates)."""
-    from ropod_sysid.odometry import constraint_system
-
-    n, j = angles.shape
-    a, _ = constraint_system(model, angles, np.zeros((n, j)))  # type: ignore[arg-type]
-    ata = np.einsum("nri,nrj->nij", a, a)
-    d = np.stack([constraint_system(model, angles, np.broadcast_to(np.eye(j)[c], (n, j)))[1]  # type: ignore[arg-type]
-                  for c in range(j)], axis=-1)  # (N, r, J): b = D φ̇
-    return np.linalg.solve(ata, np.einsum("nri,nrj->nij", a, d))
-
-
 def velocity_kernel(k: int, dt: float, degree: int = 2) -> np.ndarray:
     """Per-sample kernel from an angle's error to its contribution to q̇ [1/s]: the LOESS of
     ``k`` samples (of ``degree``) and one difference. (It is odd where
@@ -220,71 +209,10 @@ def velocity_kernel(k: int, dt: float, degree: int = 2) -> np.ndarray:
     return np.convolve(signals.loess_kernel(k, degree), difference_kernel(dt, degree))
 
 
-def acceleration_covariance(model: object, st: object, noise: SensorNoise) -> np.ndarray:
-    """Covariance (N, D, D) [1/s⁴ · m², …] of the world-frame q̈ of the equation rows from
-    encoder quantisation: M Mᵀ σ_φ² ‖g_q‖² with M = [R(θ) G; E] (D, J), G the odometry gain
-    and E the selection of the units' own coordinates (a steered wheel's β̈ is its angle's
-    second difference; module docstring; zero with exact encoders)."""
-    th = st.q[:, 2]  # type: ignore[attr-defined]
-    n_dof = int(getattr(model, "n_dof", 3))
-    if noise.encoder_counts is None:
-        return np.zeros((th.size, n_dof, n_dof))
-    g = odometry_gain(model, st.angles)  # type: ignore[attr-defined]  # (N, 3, J)
-    c, s = np.cos(th), np.sin(th)
-    rot = np.zeros((th.size, 3, 3))
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
-    rot[:, 2, 2] = 1.0
-    m = np.zeros((th.size, n_dof, g.shape[2]))
-    m[:, :3] = rot @ g
-    own = np.asarray(getattr(model, "coordinate_channels", np.zeros(0, int)), int)
-    m[:, 3 + np.arange(own.size), own] = 1.0
-    # an angle that moves less than a count per sample steps rarely: its error is a sampled
-    # sawtooth, not white (sawtooth_share)
-    m = m * np.sqrt(channel_variances(noise, st.angle_rate, 2))[:, None, :]  # type: ignore[attr-defined]
-    m[:, :, ~_encoders(model, g.shape[2])] = 0.0  # a leg's extension is no rotary encoder
-    return m @ np.swapaxes(m, 1, 2)
-
-
 def _encoders(model: object, n_angles: int) -> np.ndarray:
     """(J,) bool: the platform's rotary-encoder channels (:attr:`Layout.encoders`)."""
     layout = getattr(model, "layout", None)
     return np.ones(n_angles, bool) if layout is None else np.asarray(layout.encoders, bool)
-
-
-def regressor_error_gram(model: object, st: object, noise: SensorNoise,
-                         friction: str = "per-wheel", groups: int | None = None,
-                         qdd: np.ndarray | None = None) -> np.ndarray:
-    """E[δA_dᵀ δA_d] (D, p, p) summed over the rows at ``st``, per row d: the errors of A_ID,ext
-    from the errors of q̈ (A is linear in q̈: A = A₀ + Σ_k A_k q̈_k), which bias a least-squares
-    fit towards smaller values (errors in the variables): E[m̂ − m] ≈ −(ÃᵀÃ)⁻¹ E[δÃᵀδÃ] m.
-    Through the swivel's caster offset the pivots' acceleration δ̈ carries q̈ / d, so the
-    unit-inertia columns carry q̈'s errors a hundredfold. ``groups``: the rows are that many
-    runs of equal length one after the other; returns (groups, D, p, p), a sum per run."""
-    n = st.q.shape[0]  # type: ignore[attr-defined]
-    d = int(getattr(model, "n_dof", 3))
-    zero = model.a_id_ext(st, np.zeros((n, d)), friction)  # type: ignore[attr-defined]
-    a_k = np.stack([model.a_id_ext(st, np.broadcast_to(np.eye(d)[k], (n, d)),  # type: ignore[attr-defined]
-                                   friction) - zero for k in range(d)], axis=1)  # (N, Dk, Dd, p)
-    out = error_gram(a_k, acceleration_covariance(model, st, noise), groups)
-    if qdd is not None and noise.encoder_counts is not None:
-        # and the errors of the measured angle rates the unit types use (the swivel's δ̇):
-        # ∂A/∂φ̇_j by differences, each channel's error its own (one derivative of its angle)
-        h = 1e-4
-        rates = st.angle_rate  # type: ignore[attr-defined]
-        base = model.a_id_ext(model.state(st.q, st.qd, st.angles, rates), qdd, friction)  # type: ignore[attr-defined]
-        var = channel_variances(noise, rates, 1)
-        encoders = _encoders(model, rates.shape[1])
-        for j in measured_rate_channels(model, st, qdd, friction):
-            if not encoders[j]:
-                continue
-            moved = rates.copy()
-            moved[:, j] += h
-            da = (model.a_id_ext(model.state(st.q, st.qd, st.angles, moved), qdd, friction)  # type: ignore[attr-defined]
-                  - base) / h
-            cov = np.zeros((n, 1, 1))
-            cov[:, 0, 0] = var[:, j]
-            out = out + error_gram(da[:, None], cov, groups)
-    return out
 
 
 def measured_rate_channels(model: object, st: object, qdd: np.ndarray,
@@ -304,37 +232,33 @@ def measured_rate_channels(model: object, st: object, qdd: np.ndarray,
     return out
 
 
-def error_gram(a_k: np.ndarray, cov: np.ndarray, groups: int | None = None) -> np.ndarray:
-    """Σ over rows of A_kᵀ cov_kl A_l per row d: (D, p, p), or (groups, D, p, p) for rows that
-    are ``groups`` runs one after the other; ``a_k`` (N, K, D, p): ∂A/∂x_k of K error sources,
-    ``cov`` (N, K, K) their covariance (:func:`regressor_error_gram`)."""
-    t = np.einsum("nkl,nkdp->nldp", cov, a_k)  # Σ_k cov_kl A_k
-    g = 1 if groups is None else groups
-    d, p = a_k.shape[2], a_k.shape[-1]
-    # Σ_{n,l} A_l[d]ᵀ t_l[d] by one batched product per run and row (BLAS, not einsum)
-    x = np.moveaxis(a_k.reshape(g, -1, d, p), 2, 1)  # (g, d, n·l, p)
-    y = np.moveaxis(t.reshape(g, -1, d, p), 2, 1)
-    out = np.swapaxes(x, -1, -2) @ y
-    return out[0] if groups is None else out
+def row_variances(model: object, rows: object, params: object, noise: SensorNoise,
+                  friction: str = "per-wheel", encoder: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """Variance (N, D) [N², N², (N m)², …] of each DOF of the equation rows ``rows``
+    (:class:`MotionRows`, e.g. :func:`planned_rows`) under ``noise``: current noise through
+    B_τ, the torque average and the rows' LOESS (module docstring; zero on the own rows of a
+    held joint, which the fit locks), and the encoders' share, the variance of the rows' error
+    δA m through the fit's recipe (:func:`recipe_error_gram`; ``encoder`` (N, D) when already
+    formed). ``params`` the true values (:class:`~ropod_sysid.params.DynamicParameters`)."""
+    from ropod_sysid.regressor import held_joints
 
-
-def row_variances(model: object, st: object, params: object, noise: SensorNoise,
-                  friction: str = "per-wheel") -> np.ndarray:
-    """Variance (N, 3) [N², N², (N m)²] of each DOF of the equation rows at the states ``st``
-    (:meth:`ropod_sysid.model.PlatformModel.state`) under ``noise``: current noise through
-    B_τ, encoder quantisation through odometry, the derivative kernel and M_dir (module
-    docstring); ``params`` the true values (for M_dir)."""
-    grid = noise.grid
-    b_tau = st.b_tau  # type: ignore[attr-defined]
+    st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
+    b_tau = st.b_tau
     out = np.zeros(b_tau.shape[:2])  # (N, D)
     if noise.current_noise > 0:
+        grid = noise.grid
         k_t = model.platform.torque_constants()  # type: ignore[attr-defined]
         power = float(np.sum(row_kernel(grid, current_kernel(grid)) ** 2))
         out += np.einsum("nda,a->nd", b_tau**2, (k_t * noise.current_noise) ** 2) * power
+        if out.shape[1] > 3:  # the fit locks a held joint: its own rows are zero
+            own = model.coordinate_channels  # type: ignore[attr-defined]
+            out[:, 3:][held_joints(model, rows.angle_rates[:, own])] = 0.0  # type: ignore[arg-type, attr-defined]
     if noise.encoder_counts is not None:
-        m_dir = model.direct_eom(st, params, friction).m_dir  # type: ignore[attr-defined]
-        cov = acceleration_covariance(model, st, noise)
-        out += np.einsum("ndk,nkl,ndl->nd", m_dir, cov, m_dir)  # the rows' error M_dir δq̈
+        if encoder is None:
+            truth = params.vector(model.parameter_names(friction))  # type: ignore[attr-defined]
+            encoder = recipe_error_gram(model, rows, noise, friction, truth)[1]
+        out += encoder  # type: ignore[operator]
     return out
 
 
@@ -381,7 +305,7 @@ def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,
     them: σ̂ √(c diag((ÃᵀÃ)⁻¹)) on the fit's columns (:func:`base_columns`: on a rank-deficient
     problem a combination's σ for its base parameter, inf for the dependent ones); and the bias
     (p,) the errors of q̈ in A_ID,ext give the fit, −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m
-    (:func:`regressor_error_gram`; zero without it, nan outside the identifiable subspace).
+    (:func:`recipe_error_gram`; zero without it, nan outside the identifiable subspace).
 
     a : (M, 3, p) rows at the evaluation samples, each standing for ``rows_per_eval`` of the
     fit's rows; variances : (M, 3) their variances (:func:`row_variances`); truth : (p,) the
@@ -439,23 +363,17 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     (:func:`recipe_error_gram`) at every ``stride``-th row of the log (default
     :func:`gram_stride` of the rows' span; ``first_row``: the log's row number of
     ``index[0]``, so that blocks streamed in chunks pick the rows of the whole log), each
-    weighted ``stride``, in chunks of rows that bound its memory (about 64 MB)."""
+    weighted ``stride``."""
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
                         row_step=pre.grid.step, degree=pre.degree)  # type: ignore[attr-defined]
     index = np.asarray(index)
     stride = gram_stride(pre.grid.span) if stride is None else max(1, int(stride))  # type: ignore[attr-defined]
     index = index[(first_row + np.arange(index.size)) % stride == stride // 2]
-    j, d = pre.angles.shape[1], int(getattr(model, "n_dof", 3))  # type: ignore[attr-defined]
-    p = len(model.parameter_names(friction))  # type: ignore[attr-defined]
     if index.size == 0:
+        p = len(model.parameter_names(friction))  # type: ignore[attr-defined]
         return np.zeros((3, p, p))
-    chunk = max(256, int(8e6 // (2 * j * d * p)))
-    out, used = 0.0, None
-    for k in range(0, max(index.size, 1), chunk):
-        rows = pre.take(index[k:k + chunk])  # type: ignore[attr-defined]
-        gram, used = recipe_error_gram(model, rows, noise, friction, used=used)
-        out = out + gram
-    return kind_grams(out) * float(stride)  # type: ignore[arg-type]
+    gram, _ = recipe_error_gram(model, pre.take(index), noise, friction)  # type: ignore[attr-defined]
+    return kind_grams(gram) * float(stride)
 
 
 def _turning_channels(model: object, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
@@ -479,11 +397,12 @@ def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.nd
                   eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
     """How the angle channels' errors reach the world-frame q̇ and q̈ (N, D) of the rows
     through odometry: M (N, D, J), δq̇ = M δφ̇ and δq̈ = M δφ̈ + K δφ̇, with K (N, D, J).
-    M = [R(θ) G; E] (G the odometry gain :func:`odometry_gain`, E the selection of the units'
-    own coordinates); K from q̈ = R (ν̇ + ω × ν) with ν = G(φ) φ̇: ν̇ = G φ̈ + Ġ φ̇, so a
-    rate error δφ̇_j moves q̈ by R (Ġ e_j + ∂(G φ̇)/∂φ_j + δω × ν + ω × G e_j) — the wheels'
-    rolling rows turn with the steering angles, so a steering angle's rate error reaches q̈
-    with about the wheel speed as gain (Ġ by differences along φ̇, ∂/∂φ_j by differences)."""
+    M = [R(θ) G; E] (G = (CᵀC)⁻¹ Cᵀ D the odometry gain from the units' constraint rows
+    C ν = D φ̇, E the selection of the units' own coordinates); K from q̈ = R (ν̇ + ω × ν)
+    with ν = G(φ) φ̇: ν̇ = G φ̈ + Ġ φ̇, so a rate error δφ̇_j moves q̈ by
+    R (Ġ e_j + ∂(G φ̇)/∂φ_j + δω × ν + ω × G e_j) — the wheels' rolling rows turn with the
+    steering angles, so a steering angle's rate error reaches q̈ with about the wheel speed as
+    gain (Ġ by differences along φ̇, ∂/∂φ_j by differences)."""
     from ropod_sysid.odometry import constraint_system, solve_symmetric3
 
     n, j = angles.shape
@@ -524,13 +443,50 @@ def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.nd
     return m, k
 
 
-def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
-                      friction: str = "per-wheel", h: float = 1e-6,
-                      used: list[int] | None = None) -> tuple[np.ndarray, list[int]]:
-    """E[δA_dᵀ δA_d] (D, p, p) summed over the rows ``rows`` (a :class:`Preprocessed` of the
-    row samples), per row d: each encoder channel's rate and acceleration errors (odd and even
-    kernels: uncorrelated; :func:`channel_variances`) carried through the fit's recipe
-    (:func:`ropod_sysid.regressor.raw_system`) to first order:
+@dataclass
+class MotionRows:
+    """The motion at equation rows as the fit's recipe reads it: the fields of a
+    :class:`ropod_sysid.regressor.Preprocessed` that :func:`recipe_sensitivities` reads, for
+    rows that come from no log (a planned run's: :func:`planned_rows`).
+
+    q : (N, 3) pose; qd : (N, 3) the base's rates; qdd : (N, D) the accelerations of every
+    DOF (the base's, then the units' own coordinates'); angles, angle_rates : (N, J) the unit
+    angles and their rates as the encoders give them.
+    """
+
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    angles: np.ndarray
+    angle_rates: np.ndarray
+
+    def take(self, index: slice | np.ndarray) -> MotionRows:
+        """The rows at ``index`` (as :meth:`Preprocessed.take`)."""
+        return MotionRows(self.q[index], self.qd[index], self.qdd[index], self.angles[index],
+                          self.angle_rates[index])
+
+
+def planned_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                 angles: np.ndarray, angle_rates: np.ndarray | None = None) -> MotionRows:
+    """The :class:`MotionRows` of a planned motion: q (N, 3), q̇ and q̈ (N, D) (the units' own
+    coordinates' rates after the base's), the predicted angles (N, J); ``angle_rates`` (N, J)
+    the encoders' rates (None: the rates the base motion implies at the angles, the units' own
+    coordinates' from q̇ — what the planned A_ID,ext reads, :meth:`PlatformModel.state`)."""
+    if angle_rates is None:
+        angle_rates = model.state(q, qd, angles).angle_rate  # type: ignore[attr-defined]
+    return MotionRows(q, qd[:, :3], qdd, angles, angle_rates)
+
+
+def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
+                         friction: str = "per-wheel", h: float = 1e-6,
+                         used: list[int] | None = None) -> tuple[np.ndarray, list[int]]:
+    """W (N, 2J, D, p): the first-order change of each row's A_ID,ext per standard deviation
+    of each encoder channel's rate error (the first J sources) and acceleration error (the
+    last J) at the rows ``rows`` (a :class:`Preprocessed` of the row samples, or
+    :class:`MotionRows`). The sources are independent (odd and even kernels: uncorrelated;
+    :func:`channel_variances`), so E[δA_dᵀ δA_d] = Σ_s W_sdᵀ W_sd and the row's error δA_d m
+    has the variance Σ_s (W_sd m)² (:func:`recipe_error_gram`). The errors are carried
+    through the fit's recipe (:func:`ropod_sysid.regressor.raw_system`):
 
     * odometry (:func:`odometry_maps`): δq̇ = M δφ̇, δq̈ = M δφ̈ + K δφ̇;
     * :meth:`~ropod_sysid.model.PlatformModel.consistent_motion`: δq̇ ← P_v δq̇ (its own
@@ -543,7 +499,7 @@ def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
       singular configurations) and the rows at rest zero, as the fit forms them.
 
     Without constraints the projections are the identity. ``used``: the rate channels A or
-    Ġ q̇ reads (None: found on a few rows); returned with the gram, for the next rows.
+    Ġ q̇ reads (None: found on a few rows); returned with W, for the next rows.
     (Second-order terms — the angles' own errors in A's angle-dependent columns — are left
     out.)"""
     from ropod_sysid.model.assembly import SINGULAR_MARGIN, base_singular_ratio
@@ -617,8 +573,36 @@ def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
     coef = coef * sd[:, None, :]
     p = da_all.shape[-1]
     w = np.swapaxes(coef, 1, 2) @ da_all.reshape(n, -1, d * p)  # (N, 2J, D·p)
-    x = np.moveaxis(w.reshape(n, -1, d, p), 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
-    return np.swapaxes(x, 1, 2) @ x, used
+    return w.reshape(n, -1, d, p), used
+
+
+
+
+def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
+                      friction: str = "per-wheel", truth: np.ndarray | None = None,
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """E[δA_dᵀ δA_d] (D, p, p) summed over the rows ``rows`` (a :class:`Preprocessed` of the
+    row samples, or :class:`MotionRows`), per row d, from the encoders' quantisation carried
+    through the fit's recipe (:func:`recipe_sensitivities`), in chunks of rows that bound its
+    memory (about 64 MB); and with ``truth`` m (p,) the variance (N, D) of each row's error
+    δA_d m = Σ_s (W_sd m)², the encoders' share of the rows' noise (None without ``truth``).
+    Zero with exact encoders."""
+    n, j = rows.angles.shape  # type: ignore[attr-defined]
+    d, p = int(getattr(model, "n_dof", 3)), len(model.parameter_names(friction))  # type: ignore[attr-defined]
+    gram = np.zeros((d, p, p))
+    var = None if truth is None else np.zeros((n, d))
+    if noise.encoder_counts is None:
+        return gram, var
+    chunk = max(256, int(8e6 // (2 * j * d * p)))
+    used = None
+    for k in range(0, n, chunk):
+        w, used = recipe_sensitivities(model, rows.take(slice(k, k + chunk)), noise,  # type: ignore[attr-defined]
+                                       friction, used=used)
+        x = np.moveaxis(w, 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
+        gram += np.swapaxes(x, 1, 2) @ x
+        if var is not None:
+            var[k:k + chunk] = (np.einsum("nsdp,p->nsd", w, truth) ** 2).sum(axis=1)
+    return gram, var
 
 
 def kind_grams(per_dof: np.ndarray) -> np.ndarray:

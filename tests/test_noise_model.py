@@ -224,7 +224,60 @@ def test_encoder_counts_are_detected_from_the_angles_steps_not_from_a_writers_ro
     assert detect_encoder_counts(np.round(exact, 7), wrapped) is None
 
 
-def test_the_encoders_error_gram_matches_the_measured_one_on_a_constrained_platform():
+@pytest.fixture(scope="module")
+def steered_swivel_rows():
+    """The first log of steered-swivel, exact and as 2¹⁴-count encoders read it (no current
+    noise): platform, truth, model, the two logs, the quantised log preprocessed, and the
+    filtered rows of both (A_exact, A_quantised)."""
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.regressor import filtered_system, preprocess
+    from ropod_sysid.simulate import sensed
+    from tests.conftest import shipped
+
+    pf, truth, logs = shipped("steered-swivel")
+    log = logs[0]
+    quantised = sensed(log, pf, Sensors(encoder_counts=2**14, current_noise=0.0),
+                       np.random.default_rng(0))
+    model = PlatformModel(pf)
+    a_e, _ = filtered_system(model, preprocess(log, pf))
+    pre = preprocess(quantised, pf)
+    a_q, _ = filtered_system(model, pre)
+    return pf, truth, model, log, quantised, pre, a_e, a_q
+
+
+def test_the_planned_runs_encoder_errors_are_the_fits_on_the_same_rows(steered_swivel_rows):
+    """Issue 14 item 6: ``trajectory check`` carries the encoders' errors through the fit's
+    own recipe. Given the row samples of the quantised steered-swivel log as its planned
+    motion, the planned-run path (what :func:`stacked_regressor` calls) returns the error gram
+    ``fit --encoder-counts`` subtracts (:func:`fit_error_gram`) to round-off; and the rows'
+    encoder variance it adds to σ̂², the variance of δA m, is the measured one of the filtered
+    rows' (quantised − exact) A m on the base rows to 0.7–1.3 (measured 0.84, 0.77, 0.81 for
+    x, y, θ; the old chain, q̈'s errors through the odometry gain alone: 1.14, 1.30, 0.27).
+    The steering rows' variance it puts 4–8× low (measured 0.12, 0.24; the old chain the
+    same), not asserted: a cause not found, and a small share of σ̂² (those rows' variance is
+    30–60× smaller than the base rows')."""
+    from ropod_sysid.noise import fit_error_gram
+    from ropod_sysid.trajectory.identifiability import _regressor_rows
+
+    pf, truth, model, _, _, pre, a_e, a_q = steered_swivel_rows
+    rows = pre.row_samples()
+    sensors = SensorNoise(0.0, 2**14, 1.0 / pre.dt, span=pre.span_samples * pre.dt,
+                          row_step=pre.grid.step, degree=pre.degree)
+    own = model.coordinate_channels
+    qd = np.concatenate([pre.qd, pre.angle_rates[:, own]], axis=1)
+    _, var, gram = _regressor_rows(model, pre.q[rows], qd[rows], pre.qdd[rows],
+                                   pre.angles[rows], "per-wheel", noise=(truth, sensors),
+                                   angle_rates=pre.angle_rates[rows])
+    fit = fit_error_gram(model, pre, rows, 2**14)
+    np.testing.assert_allclose(gram, fit, rtol=1e-10, atol=1e-12 * np.abs(fit).max())
+    m = truth.vector(model.parameter_names())
+    err = (a_q - a_e) @ m  # (N, D): the rows' error from the encoders (no current noise)
+    ratio = var.mean(axis=0)[:3] / np.mean(err**2, axis=0)[:3]
+    assert np.all((ratio > 0.7) & (ratio < 1.3)), ratio.round(3)
+
+
+def test_the_encoders_error_gram_matches_the_measured_one_on_a_constrained_platform(
+        steered_swivel_rows):
     """Issue 14: the error gram ``fit --encoder-counts`` subtracts, against the Gram matrix of
     the filtered rows' differences (2¹⁴-count quantised − exact) on the first log of
     steered-swivel (two steered wheels, two casters: its rows are projected onto the allowed
@@ -236,22 +289,11 @@ def test_the_encoders_error_gram_matches_the_measured_one_on_a_constrained_platf
     this one log, where J_zz,b is poorly determined: plain −129 %, corrected +0.0 %; before
     issue 14 the correction gave −131 %). About 3 s."""
     from ropod_sysid.fit import FitOptions
-    from ropod_sysid.model import PlatformModel
     from ropod_sysid.noise import fit_error_gram
-    from ropod_sysid.regressor import filtered_system, preprocess
-    from ropod_sysid.simulate import sensed
     from ropod_sysid.solve import kind_rows
-    from tests.conftest import shipped
 
-    pf, _, logs = shipped("steered-swivel")
-    log = logs[0]
-    quantised = sensed(log, pf, Sensors(encoder_counts=2**14, current_noise=0.0),
-                       np.random.default_rng(0))
-    model = PlatformModel(pf)
+    pf, _, model, log, quantised, pre, a_e, a_q = steered_swivel_rows
     names = model.parameter_names()
-    a_e, _ = filtered_system(model, preprocess(log, pf))
-    pre = preprocess(quantised, pf)
-    a_q, _ = filtered_system(model, pre)
     pred = fit_error_gram(model, pre, pre.row_samples(), 2**14)
     inertial = [j for j, n in enumerate(names) if n.startswith(("m_", "J"))]
     for d in range(3):

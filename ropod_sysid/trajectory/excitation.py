@@ -180,15 +180,15 @@ class _Objective:
         # consistent kinematics, so the structural rank deficiency shows exactly
         st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, d),
                               pred.angles[:, :, idx].reshape(n_s * 4 * idx.size, -1))
-        a = self.model.a_id_ext(st, qdd[:, :, idx].reshape(-1, d),
-                                self.friction)  # type: ignore[arg-type]
+        qdd_rows = qdd[:, :, idx].reshape(-1, d)
+        a = self.model.a_id_ext(st, qdd_rows, self.friction)  # type: ignore[arg-type]
         # the fraction of samples near singular, whose base rows the fit leaves out
         ratio = self.model.singular_ratio(st)
         singular = (np.zeros(n_s) if ratio is None else
                     (ratio.reshape(n_s, -1) < SINGULAR_MARGIN).mean(axis=1))
         singular = SINGULAR_WEIGHT * singular
         if self.sigma is not None:
-            value = self._sigma_value(a.reshape(n_s, -1, d, a.shape[-1]), st)
+            value = self._sigma_value(a.reshape(n_s, -1, d, a.shape[-1]), st, qdd_rows)
             return value + 10.0 * penalty + 100.0 * penalty**2 + singular
         a = a.reshape(n_s, -1, a.shape[-1])
         norms = np.linalg.norm(a, axis=1)
@@ -209,20 +209,23 @@ class _Objective:
         return value + 10.0 * penalty + 100.0 * penalty**2 + singular
 
 
-    def _sigma_value(self, a: np.ndarray, st: object) -> np.ndarray:
+    def _sigma_value(self, a: np.ndarray, st: object, qdd: np.ndarray) -> np.ndarray:
         """Mean log relative predicted σ of the target parameters (S,) from the candidates'
-        rows a (S, R, D, p): the fit's white-noise σ (:mod:`ropod_sysid.noise`), the
-        θ rows weighted as the fit weighs them, σ̂ from the rows' mean variances (taken once:
+        rows a (S, R, D, p) at the states ``st`` and accelerations ``qdd`` (S·R, D): the fit's
+        white-noise σ (:mod:`ropod_sysid.noise`), the θ rows weighted as the fit weighs them,
+        σ̂ from the rows' mean variances (:func:`~ropod_sysid.noise.row_variances`, taken once:
         they hardly depend on the run), on the fit's base columns when the platform leaves
         combinations (:meth:`SigmaTarget.columns`). (The errors-in-variables bias needs the
         pivots' motion finer than this grid: :func:`optimize` weighs it in when it picks among
         the best candidates.)"""
-        from ropod_sysid.noise import row_variances
+        from ropod_sysid.noise import planned_rows, row_variances
 
         sig = self.sigma
         assert sig is not None
         if self.variances is None:
-            self.variances = row_variances(self.model, st, sig.truth_params, sig.sensors,
+            rows = planned_rows(self.model, st.q, st.qd, qdd, st.angles,  # type: ignore[attr-defined]
+                                st.angle_rate)  # type: ignore[attr-defined]
+            self.variances = row_variances(self.model, rows, sig.truth_params, sig.sensors,
                                            self.friction).mean(axis=0)
             # the fit's columns of the candidate that excites the most of them (a leg that
             # hardly moves in one candidate leaves its columns out of that one's)

@@ -52,35 +52,38 @@ def with_own_coordinates(model: object, t: np.ndarray, qd: np.ndarray, qdd: np.n
 def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                     angles: np.ndarray, friction: str, chunk: int = 20000,
                     noise: tuple[object, object] | None = None,
+                    angle_rates: np.ndarray | None = None,
                     ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A_ID,ext (M, D, p) at M samples with unit angles (M, J) (chunked to bound the memory);
-    the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a); a unit's own
-    joint is locked while it is held, as the fit locks it. With ``noise`` = (true
-    parameters, :class:`~ropod_sysid.noise.SensorNoise`) also the rows' variances (M, D)
-    (:func:`~ropod_sysid.noise.row_variances`) and the error gram of A per row kind (3, p, p)
-    (:func:`~ropod_sysid.noise.regressor_error_gram`, :func:`~ropod_sysid.noise.kind_grams`)."""
-    from ropod_sysid.noise import kind_grams, regressor_error_gram, row_variances
+    the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a) unless
+    ``angle_rates`` (M, J) gives them (as a log's encoders would); a unit's own joint is
+    locked while it is held, as the fit locks it. With ``noise`` = (true parameters,
+    :class:`~ropod_sysid.noise.SensorNoise`) also the rows' variances (M, D)
+    (:func:`~ropod_sysid.noise.row_variances`) and the encoders' error gram of A per row kind
+    (3, p, p), both from the errors carried through the fit's own recipe
+    (:func:`~ropod_sysid.noise.recipe_error_gram`, the one ``fit --encoder-counts``
+    subtracts; :func:`~ropod_sysid.noise.kind_grams`)."""
+    from ropod_sysid.noise import kind_grams, planned_rows, recipe_error_gram, row_variances
 
     out, var = [], []
     gram = 0.0
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
-        st = model.state(q[sl], qd[sl], angles[sl])  # type: ignore[attr-defined]
-        held = None
+        rates = None if angle_rates is None else angle_rates[sl]
+        st = model.state(q[sl], qd[sl], angles[sl], rates)  # type: ignore[attr-defined]
         if qd.shape[1] > 3:  # the fit locks a unit's own joint while it is held
             from ropod_sysid.regressor import held_joints
 
             st.held = held_joints(model, qd[sl, 3:])  # type: ignore[arg-type]
-            held = np.nonzero(st.held)
         a = model.a_id_ext(st, qdd[sl], friction)  # type: ignore[attr-defined]
         out.append(a)
         if noise is not None:
-            v = row_variances(model, st, noise[0], noise[1], friction)  # type: ignore[arg-type]
-            if held is not None:
-                v[held[0], 3 + held[1]] = 0.0
-            var.append(v)
-            gram = gram + kind_grams(regressor_error_gram(model, st, noise[1], friction,  # type: ignore[arg-type]
-                                                          qdd=qdd[sl]))
+            params, sensors = noise
+            rows = planned_rows(model, q[sl], qd[sl], qdd[sl], angles[sl], rates)
+            truth = params.vector(model.parameter_names(friction))  # type: ignore[attr-defined]
+            g, enc = recipe_error_gram(model, rows, sensors, friction, truth)  # type: ignore[arg-type]
+            var.append(row_variances(model, rows, params, sensors, friction, encoder=enc))  # type: ignore[arg-type]
+            gram = gram + kind_grams(g)
     a = np.concatenate(out, axis=0)
     return a if noise is None else (a, np.concatenate(var, axis=0), gram)
 

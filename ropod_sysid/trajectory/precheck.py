@@ -596,9 +596,9 @@ def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, mo
                       noise: tuple[object, SensorNoise] | None = None) -> tuple[np.ndarray, float]:
     """A_ID,ext (4M, 3, p) of the four variants (twists (4, N, 3) on the grid of ``fine``,
     predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for.
-    With ``noise`` = (true parameters, sensors) A is returned with the rows' variances (4M, 3)
-    and the error gram of A (:func:`ropod_sysid.noise.row_variances`,
-    :func:`~ropod_sysid.noise.regressor_error_gram`)."""
+    With ``noise`` = (true parameters, sensors) A is returned with the rows' variances (4M, D)
+    and the encoders' error gram of A per row kind (3, p, p), both through the fit's own recipe
+    (:func:`ropod_sysid.noise.row_variances`, :func:`~ropod_sysid.noise.recipe_error_gram`)."""
     dt = float(np.median(np.diff(fine.t)))
     step = max(int(round(1.0 / (eval_rate * dt))), 1)
     idx = np.arange(0, fine.n_samples, step)
