@@ -146,6 +146,17 @@ def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: 
 
 
 @njit(cache=True, error_model="numpy")
+def _rates(x: np.ndarray, arate: np.ndarray, k: np.ndarray) -> None:
+    """The rates of the state besides q̈_b into ``k``: q̇_b and the unit rates. Element by
+    element: a slice assignment would compile numba's shape-mismatch error message (its
+    string formatting took 3 s of the first compile)."""
+    for c in range(3):
+        k[c] = x[3 + c]
+    for j in range(arate.shape[0]):
+        k[6 + j] = arate[j]
+
+
+@njit(cache=True, error_model="numpy")
 def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     """Kinetic energy of base and units [J] (App. C)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
@@ -229,17 +240,19 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                     rec_tau_sum[near, r, a] += tau[a]
             k1 = ks[0]
             _accel(x, m, b, btau, tauf, ff, tau, fb, has_fb, rhs, k1[3:6])
-            k1[0:3] = x[3:6]
-            k1[6:] = arate
+            _rates(x, arate, k1)
             if step % stride == 0:
                 k = step // stride
-                rec_q[k, r] = x[0:3]
-                rec_qd[k, r] = x[3:6]
-                rec_qdd[k, r] = k1[3:6]
-                rec_ang[k, r] = x[6:]
-                rec_tau[k, r] = tau
-                if has_fb:
-                    rec_fb[k, r] = fb
+                for c in range(3):
+                    rec_q[k, r, c] = x[c]
+                    rec_qd[k, r, c] = x[3 + c]
+                    rec_qdd[k, r, c] = k1[3 + c]
+                    if has_fb:
+                        rec_fb[k, r, c] = fb[c]
+                for j in range(n_x - 6):
+                    rec_ang[k, r, j] = x[6 + j]
+                for a in range(n_act):
+                    rec_tau[k, r, a] = tau[a]
                 rec_e[k, r] = _energy(groups, bp, x)
             if step == last[r]:
                 break
@@ -252,8 +265,7 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                 _eom(groups, bp, y, m, b, btau, tauf, ff, arate, crate)
                 kn = ks[stage]
                 _accel(y, m, b, btau, tauf, ff, tau, fb, has_fb, rhs, kn[3:6])
-                kn[0:3] = y[3:6]
-                kn[6:] = arate
+                _rates(y, arate, kn)
             for j in range(n_x):
                 x[j] = x[j] + dt / 6 * (ks[0, j] + 2 * ks[1, j] + 2 * ks[2, j] + ks[3, j])
 
