@@ -12,10 +12,17 @@ base. The controller (PI per actuator, anti-windup, torque limit), the setpoints
 grid, the recording every ``stride`` steps and the kinetic energy are the same as the numpy
 path's, which stays the reference (results equal to round-off, ``tests/test_simulate_jit.py``).
 
-Compiled functions are cached on disk (``cache=True``): the first call in a fresh environment
-compiles (tens of seconds on a busy machine), later processes load the cache. numba checks a
-cached function only against its own source file, not those of the functions it calls, so this
-module's caches are flushed when a kernel module's source changes (:func:`_refresh_caches`).
+:func:`run` alone is called from Python and cached on disk (``cache=True``): the first call in
+a fresh environment compiles (about 11 s, numba's typing and lowering more than LLVM), later
+processes load the cache (about 1 s). The functions it calls are compiled into it: they have no
+Python wrapper and no cache of their own (``no_cpython_wrapper=True``; each wrapper and cache
+cost the first compile a fraction of a second), and the kind dispatchers (``_unit_*``) are
+inlined into their callers (``inline="always"``), so no separately optimised library sits
+between the loop and the kernels. Arrays are copied element by element, not by slice
+assignment, which would compile numba's shape-mismatch message (3 s of string formatting).
+numba checks a cached function only against its own source file, not those of the functions
+it calls, so :func:`run`'s cache is flushed when a kernel module's source changes
+(:func:`_refresh_caches`).
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ CHUNK = 2000  # steps per compiled call (between progress-bar updates)
 NO_TORQUES = np.zeros((1, 1, 1))  # run's tau_given when its controller acts
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", no_cpython_wrapper=True, error_model="numpy")
 def _unit_dynamics(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray,
                    ic: np.ndarray, q: np.ndarray, qd: np.ndarray, ang: np.ndarray,
                    m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: np.ndarray,
@@ -49,7 +56,7 @@ def _unit_dynamics(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray,
         omni_jit.dynamics(geo, par, ia, ic, q, qd, ang, m, b, btau, tauf, ff, arate, crate)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", no_cpython_wrapper=True, error_model="numpy")
 def _unit_actuator_rates(kind: int, geo: np.ndarray, ia: np.ndarray, ic: np.ndarray,
                          q: np.ndarray, qd: np.ndarray, ang: np.ndarray,
                          crate: np.ndarray) -> None:
@@ -59,7 +66,7 @@ def _unit_actuator_rates(kind: int, geo: np.ndarray, ia: np.ndarray, ic: np.ndar
         omni_jit.actuator_rates(geo, ia, ic, q, qd, ang, crate)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", no_cpython_wrapper=True, error_model="numpy")
 def _unit_energy(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q: np.ndarray,
                  qd: np.ndarray, ang: np.ndarray) -> float:
     if kind == 0:
@@ -67,7 +74,7 @@ def _unit_energy(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q:
     return omni_jit.kinetic_energy(geo, par, ia, q, qd, ang)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _eom(groups: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, b: np.ndarray,
          btau: np.ndarray, tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray,
          crate: np.ndarray) -> None:
@@ -101,7 +108,7 @@ def _eom(groups: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, b: np.ndar
         ff[2] += f2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _solve3(a: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out = a⁻¹ y for a 3 × 3 matrix (Gaussian elimination with partial pivoting, as LAPACK's
     gesv); ``a`` and ``y`` are overwritten."""
@@ -126,7 +133,7 @@ def _solve3(a: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
         out[r] = acc / a[r, r]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: np.ndarray,
            ff: np.ndarray, tau: np.ndarray, fb: np.ndarray, has_fb: bool, rhs: np.ndarray,
            qdd: np.ndarray) -> None:
@@ -145,18 +152,17 @@ def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: 
     _solve3(m, rhs, qdd)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _rates(x: np.ndarray, arate: np.ndarray, k: np.ndarray) -> None:
-    """The rates of the state besides q̈_b into ``k``: q̇_b and the unit rates. Element by
-    element: a slice assignment would compile numba's shape-mismatch error message (its
-    string formatting took 3 s of the first compile)."""
+    """The rates of the state besides q̈_b into ``k``: q̇_b and the unit rates (element by
+    element, see the module's docstring)."""
     for c in range(3):
         k[c] = x[3 + c]
     for j in range(arate.shape[0]):
         k[6 + j] = arate[j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     """Kinetic energy of base and units [J] (App. C)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
@@ -168,15 +174,13 @@ def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _control(groups: tuple, x: np.ndarray, sp: np.ndarray, qd_set: np.ndarray,
-             want: np.ndarray, bp: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray,
-             tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray, crate: np.ndarray,
-             integ: np.ndarray, tau: np.ndarray, kp: float, ki: float, limit: float,
-             dt: float) -> None:
+             want: np.ndarray, crate: np.ndarray, integ: np.ndarray, tau: np.ndarray, kp: float,
+             ki: float, limit: float, dt: float) -> None:
     """The controller (zero-order hold over the step): IK for the current unit angles, one PI
-    loop per actuator with anti-windup and the torque limit; also leaves the equations of
-    motion at x in m, b, btau, tauf, ff, arate, crate."""
+    loop per actuator with anti-windup and the torque limit, on the actuator rates ``crate`` at
+    x (:func:`_eom`)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
     c, s = math.cos(x[2]), math.sin(x[2])
     qd_set[0] = c * sp[0] - s * sp[1]
@@ -186,7 +190,6 @@ def _control(groups: tuple, x: np.ndarray, sp: np.ndarray, qd_set: np.ndarray,
         _unit_actuator_rates(kinds[g], geo[goff[g]:goff[g + 1]],
                              ia[iaoff[g]:iaoff[g + 1]], ic[icoff[g]:icoff[g + 1]],
                              x[0:3], qd_set, x[6:], want)
-    _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
     for a in range(tau.shape[0]):
         err = want[a] - crate[a]
         raw = kp * err + ki * (integ[a] + err * dt)
@@ -226,13 +229,13 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
         x = x_all[r]
         integ = integ_all[r]
         for step in range(first, min(end, last[r]) + 1):
+            _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
             if given:
-                _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
                 for a in range(n_act):
                     tau[a] = tau_given[step, r, a]
             else:
-                _control(groups, x, sp_all[step, r], qd_set, want, bp, m, b, btau, tauf, ff,
-                         arate, crate, integ, tau, kp, ki, limit, dt)
+                _control(groups, x, sp_all[step, r], qd_set, want, crate, integ, tau, kp, ki,
+                         limit, dt)
             fb = f_all[step if has_fb else 0, r]
             near = (step + stride // 2) // stride
             if near < rec_tau_sum.shape[0]:
