@@ -30,9 +30,15 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
+
+try:
+    import fcntl
+except ImportError:  # not on Windows: there every process compiles for itself
+    fcntl = None  # type: ignore[assignment]
 
 import numpy as np
 from numba import njit
@@ -326,9 +332,29 @@ def integrate(groups: tuple[np.ndarray, ...], bp: np.ndarray, ctrl: np.ndarray, 
     bar.set(0.0, force=True)  # drawn while a first call compiles or loads the cache
     for first in range(0, steps + 1, CHUNK):
         end = min(first + CHUNK - 1, steps)
-        run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ, *records,
-            NO_TORQUES)
+        with first_compile():
+            run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ,
+                *records, NO_TORQUES)
         bar.set(min(end, steps))
+
+
+@contextmanager
+def first_compile() -> Iterator[None]:
+    """Around a call of :func:`run`: this process's first call holds a lock that every process
+    on the same cache takes, so that of processes starting on an empty cache at once (the test
+    suite's workers, a dask cluster's) one compiles and writes the cache while the others wait
+    and then load it, instead of each compiling for itself. Later calls take no lock."""
+    if run.signatures or fcntl is None:
+        yield
+        return
+    try:
+        lock = open(Path(run._cache.cache_path) / "simulate_jit.lock", "a")  # noqa: SIM115
+    except (AttributeError, OSError):  # numba's cache internals differ, or a read-only cache
+        yield
+        return
+    with lock:  # closing the file releases the lock
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 def _refresh_caches() -> None:
