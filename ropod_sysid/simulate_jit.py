@@ -12,10 +12,17 @@ base. The controller (PI per actuator, anti-windup, torque limit), the setpoints
 grid, the recording every ``stride`` steps and the kinetic energy are the same as the numpy
 path's, which stays the reference (results equal to round-off, ``tests/test_simulate_jit.py``).
 
-Compiled functions are cached on disk (``cache=True``): the first call in a fresh environment
-compiles (tens of seconds on a busy machine), later processes load the cache. numba checks a
-cached function only against its own source file, not those of the functions it calls, so this
-module's caches are flushed when a kernel module's source changes (:func:`_refresh_caches`).
+:func:`run` alone is called from Python and cached on disk (``cache=True``): the first call in
+a fresh environment compiles (about 11 s, numba's typing and lowering more than LLVM), later
+processes load the cache (about 1 s). The functions it calls are compiled into it: they have no
+Python wrapper and no cache of their own (``no_cpython_wrapper=True``; each wrapper and cache
+cost the first compile a fraction of a second), and the kind dispatchers (``_unit_*``) are
+inlined into their callers (``inline="always"``), so no separately optimised library sits
+between the loop and the kernels. Arrays are copied element by element, not by slice
+assignment, which would compile numba's shape-mismatch message (3 s of string formatting).
+numba checks a cached function only against its own source file, not those of the functions
+it calls, so :func:`run`'s cache is flushed when a kernel module's source changes
+(:func:`_refresh_caches`).
 """
 
 from __future__ import annotations
@@ -23,9 +30,15 @@ from __future__ import annotations
 import hashlib
 import inspect
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
+
+try:
+    import fcntl
+except ImportError:  # not on Windows: there every process compiles for itself
+    fcntl = None  # type: ignore[assignment]
 
 import numpy as np
 from numba import njit
@@ -38,7 +51,7 @@ CHUNK = 2000  # steps per compiled call (between progress-bar updates)
 NO_TORQUES = np.zeros((1, 1, 1))  # run's tau_given when its controller acts
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", no_cpython_wrapper=True, error_model="numpy")
 def _unit_dynamics(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray,
                    ic: np.ndarray, q: np.ndarray, qd: np.ndarray, ang: np.ndarray,
                    m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: np.ndarray,
@@ -49,7 +62,7 @@ def _unit_dynamics(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray,
         omni_jit.dynamics(geo, par, ia, ic, q, qd, ang, m, b, btau, tauf, ff, arate, crate)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", no_cpython_wrapper=True, error_model="numpy")
 def _unit_actuator_rates(kind: int, geo: np.ndarray, ia: np.ndarray, ic: np.ndarray,
                          q: np.ndarray, qd: np.ndarray, ang: np.ndarray,
                          crate: np.ndarray) -> None:
@@ -59,7 +72,7 @@ def _unit_actuator_rates(kind: int, geo: np.ndarray, ia: np.ndarray, ic: np.ndar
         omni_jit.actuator_rates(geo, ia, ic, q, qd, ang, crate)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(inline="always", no_cpython_wrapper=True, error_model="numpy")
 def _unit_energy(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q: np.ndarray,
                  qd: np.ndarray, ang: np.ndarray) -> float:
     if kind == 0:
@@ -67,7 +80,7 @@ def _unit_energy(kind: int, geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q:
     return omni_jit.kinetic_energy(geo, par, ia, q, qd, ang)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _eom(groups: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, b: np.ndarray,
          btau: np.ndarray, tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray,
          crate: np.ndarray) -> None:
@@ -101,7 +114,7 @@ def _eom(groups: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, b: np.ndar
         ff[2] += f2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _solve3(a: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out = a⁻¹ y for a 3 × 3 matrix (Gaussian elimination with partial pivoting, as LAPACK's
     gesv); ``a`` and ``y`` are overwritten."""
@@ -126,7 +139,7 @@ def _solve3(a: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
         out[r] = acc / a[r, r]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: np.ndarray,
            ff: np.ndarray, tau: np.ndarray, fb: np.ndarray, has_fb: bool, rhs: np.ndarray,
            qdd: np.ndarray) -> None:
@@ -145,7 +158,17 @@ def _accel(x: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray, tauf: 
     _solve3(m, rhs, qdd)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
+def _rates(x: np.ndarray, arate: np.ndarray, k: np.ndarray) -> None:
+    """The rates of the state besides q̈_b into ``k``: q̇_b and the unit rates (element by
+    element, see the module's docstring)."""
+    for c in range(3):
+        k[c] = x[3 + c]
+    for j in range(arate.shape[0]):
+        k[6 + j] = arate[j]
+
+
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     """Kinetic energy of base and units [J] (App. C)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
@@ -157,15 +180,13 @@ def _energy(groups: tuple, bp: np.ndarray, x: np.ndarray) -> float:
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _control(groups: tuple, x: np.ndarray, sp: np.ndarray, qd_set: np.ndarray,
-             want: np.ndarray, bp: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray,
-             tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray, crate: np.ndarray,
-             integ: np.ndarray, tau: np.ndarray, kp: float, ki: float, limit: float,
-             dt: float) -> None:
+             want: np.ndarray, crate: np.ndarray, integ: np.ndarray, tau: np.ndarray, kp: float,
+             ki: float, limit: float, dt: float) -> None:
     """The controller (zero-order hold over the step): IK for the current unit angles, one PI
-    loop per actuator with anti-windup and the torque limit; also leaves the equations of
-    motion at x in m, b, btau, tauf, ff, arate, crate."""
+    loop per actuator with anti-windup and the torque limit, on the actuator rates ``crate`` at
+    x (:func:`_eom`)."""
     kinds, geo, goff, par, poff, ia, iaoff, ic, icoff = groups
     c, s = math.cos(x[2]), math.sin(x[2])
     qd_set[0] = c * sp[0] - s * sp[1]
@@ -175,7 +196,6 @@ def _control(groups: tuple, x: np.ndarray, sp: np.ndarray, qd_set: np.ndarray,
         _unit_actuator_rates(kinds[g], geo[goff[g]:goff[g + 1]],
                              ia[iaoff[g]:iaoff[g + 1]], ic[icoff[g]:icoff[g + 1]],
                              x[0:3], qd_set, x[6:], want)
-    _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
     for a in range(tau.shape[0]):
         err = want[a] - crate[a]
         raw = kp * err + ki * (integ[a] + err * dt)
@@ -215,13 +235,13 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
         x = x_all[r]
         integ = integ_all[r]
         for step in range(first, min(end, last[r]) + 1):
+            _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
             if given:
-                _eom(groups, bp, x, m, b, btau, tauf, ff, arate, crate)
                 for a in range(n_act):
                     tau[a] = tau_given[step, r, a]
             else:
-                _control(groups, x, sp_all[step, r], qd_set, want, bp, m, b, btau, tauf, ff,
-                         arate, crate, integ, tau, kp, ki, limit, dt)
+                _control(groups, x, sp_all[step, r], qd_set, want, crate, integ, tau, kp, ki,
+                         limit, dt)
             fb = f_all[step if has_fb else 0, r]
             near = (step + stride // 2) // stride
             if near < rec_tau_sum.shape[0]:
@@ -229,17 +249,19 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                     rec_tau_sum[near, r, a] += tau[a]
             k1 = ks[0]
             _accel(x, m, b, btau, tauf, ff, tau, fb, has_fb, rhs, k1[3:6])
-            k1[0:3] = x[3:6]
-            k1[6:] = arate
+            _rates(x, arate, k1)
             if step % stride == 0:
                 k = step // stride
-                rec_q[k, r] = x[0:3]
-                rec_qd[k, r] = x[3:6]
-                rec_qdd[k, r] = k1[3:6]
-                rec_ang[k, r] = x[6:]
-                rec_tau[k, r] = tau
-                if has_fb:
-                    rec_fb[k, r] = fb
+                for c in range(3):
+                    rec_q[k, r, c] = x[c]
+                    rec_qd[k, r, c] = x[3 + c]
+                    rec_qdd[k, r, c] = k1[3 + c]
+                    if has_fb:
+                        rec_fb[k, r, c] = fb[c]
+                for j in range(n_x - 6):
+                    rec_ang[k, r, j] = x[6 + j]
+                for a in range(n_act):
+                    rec_tau[k, r, a] = tau[a]
                 rec_e[k, r] = _energy(groups, bp, x)
             if step == last[r]:
                 break
@@ -252,8 +274,7 @@ def run(groups: tuple, bp: np.ndarray, ctrl: np.ndarray, stride: int, first: int
                 _eom(groups, bp, y, m, b, btau, tauf, ff, arate, crate)
                 kn = ks[stage]
                 _accel(y, m, b, btau, tauf, ff, tau, fb, has_fb, rhs, kn[3:6])
-                kn[0:3] = y[3:6]
-                kn[6:] = arate
+                _rates(y, arate, kn)
             for j in range(n_x):
                 x[j] = x[j] + dt / 6 * (ks[0, j] + 2 * ks[1, j] + 2 * ks[2, j] + ks[3, j])
 
@@ -311,9 +332,29 @@ def integrate(groups: tuple[np.ndarray, ...], bp: np.ndarray, ctrl: np.ndarray, 
     bar.set(0.0, force=True)  # drawn while a first call compiles or loads the cache
     for first in range(0, steps + 1, CHUNK):
         end = min(first + CHUNK - 1, steps)
-        run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ, *records,
-            NO_TORQUES)
+        with first_compile():
+            run(groups, bp, ctrl, stride, first, end, last, sp, forces, has_fb, x, integ,
+                *records, NO_TORQUES)
         bar.set(min(end, steps))
+
+
+@contextmanager
+def first_compile() -> Iterator[None]:
+    """Around a call of :func:`run`: this process's first call holds a lock that every process
+    on the same cache takes, so that of processes starting on an empty cache at once (the test
+    suite's workers, a dask cluster's) one compiles and writes the cache while the others wait
+    and then load it, instead of each compiling for itself. Later calls take no lock."""
+    if run.signatures or fcntl is None:
+        yield
+        return
+    try:
+        lock = open(Path(run._cache.cache_path) / "simulate_jit.lock", "a")  # noqa: SIM115
+    except (AttributeError, OSError):  # numba's cache internals differ, or a read-only cache
+        yield
+        return
+    with lock:  # closing the file releases the lock
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 def _refresh_caches() -> None:

@@ -167,10 +167,11 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
         rec = (np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)),
                np.empty((t.size, 1, angles0.size)), np.empty((t.size, 1, n_act)),
                np.zeros((t.size, 1, 3)), np.empty((t.size, 1)), np.zeros((t.size, 1, n_act)))
-        simulate_jit.run(groups, simulate_jit.base_parameters(model, params, friction),
-                         np.array([0.0, 0.0, 0.0, dts[0] / n_sub, 1.0]), n_sub, 0, n_steps,
-                         np.array([n_steps]), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), False,
-                         x, np.zeros((1, n_act)), *rec, given)
+        with simulate_jit.first_compile():
+            simulate_jit.run(groups, simulate_jit.base_parameters(model, params, friction),
+                             np.array([0.0, 0.0, 0.0, dts[0] / n_sub, 1.0]), n_sub, 0,
+                             n_steps, np.array([n_steps]), np.zeros((1, 1, 3)),
+                             np.zeros((1, 1, 3)), False, x, np.zeros((1, n_act)), *rec, given)
         return rec[0][:, 0], rec[1][:, 0], rec[3][:, 0]
     y = (q0[None].astype(float), qd0[None].astype(float), angles0[None].astype(float))
     out = [y]

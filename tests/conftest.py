@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -29,6 +30,41 @@ from ropod_sysid.platform import Platform, load_platform, ropod_platform
 from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
 
 DATASETS = Path(__file__).resolve().parent.parent / "datasets"
+
+# the first call of the compiled simulator's loop: compiles it on an empty numba cache
+WARM_UP = """
+import numpy as np
+from ropod_sysid.params import thesis_fixed_masses
+from ropod_sysid.platform import ropod_platform
+from ropod_sysid.simulate import Setpoints, simulate
+pf = ropod_platform()
+t = np.array([0.0, 0.05])
+simulate(pf, thesis_fixed_masses(pf.unit_names), Setpoints(t, 0.1 + 0 * t, 0 * t, 0 * t),
+         engine="numba")
+"""
+_WARM_UP = pytest.StashKey[subprocess.Popen]()  # the process running WARM_UP
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """With test workers, the controller (idle while they test) starts a process that compiles
+    the simulator's loop at once: on a clean clone (no numba cache yet) the workers would each
+    compile it, at the same time, about 11 s each. A worker that needs the loop before the cache
+    is written waits for it (:func:`ropod_sysid.simulate_jit.first_compile`), then loads it;
+    until then the workers collect and run other tests. On a warm cache it only loads it."""
+    if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", 0):
+        return
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    config.stash[_WARM_UP] = subprocess.Popen(
+        [sys.executable, "-c", WARM_UP], cwd=Path(__file__).resolve().parent.parent, env=env,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Stop the compile of :func:`pytest_configure` if the tests ended before it."""
+    proc = config.stash.get(_WARM_UP, None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 def shipped(name: str) -> tuple[Platform, Parameters, list[Log]]:

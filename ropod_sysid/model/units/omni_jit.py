@@ -3,7 +3,9 @@
 The same pieces as :meth:`OmniUnits.kinematics`, :meth:`OmniUnits.mass_terms`, the per-wheel
 friction and :meth:`OmniUnits.kinetic_energy` (004 eqs. 1–13; eqs. O1–O3 of
 :mod:`ropod_sysid.model.units.omni`), written out per unit with scalars. The numpy methods stay
-the reference (``tests/test_simulate_jit.py`` compares the two).
+the reference (``tests/test_simulate_jit.py`` compares the two). The functions are compiled into
+the simulator's loop (:func:`ropod_sysid.simulate_jit.run`, cached with it) and have no Python
+wrapper of their own (``no_cpython_wrapper=True``): they are not called from Python.
 
 Arrays (:func:`arrays`):
 
@@ -35,7 +37,7 @@ def arrays(units: OmniUnits, params: Mapping[str, float], variant: str
     return geo, np.concatenate([[float(params["Jrot_o"])], fov, foc])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def dynamics(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarray,
              qd: np.ndarray, ang: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray,
              tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray, crate: np.ndarray) -> None:
@@ -63,7 +65,7 @@ def dynamics(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, ic: np.ndarray, q
         crate[ic[i]] = phid
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def actuator_rates(geo: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, ang: np.ndarray, crate: np.ndarray) -> None:
     """φ̇_i = J_i q̇_b (O1) the base motion asks of the wheels, into ``crate`` (A,)."""
@@ -73,7 +75,7 @@ def actuator_rates(geo: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarra
         crate[ic[i]] = (ch * qd[0] + sh * qd[1] + c_i * qd[2]) / r_i
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def kinetic_energy(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, ang: np.ndarray) -> float:
     """Σ_i ½ J_rot,o φ̇_i² [J] with φ̇_i from O1."""

@@ -4,7 +4,9 @@ The same pieces as :meth:`SwivelUnits.pivot_kinematics`, :meth:`SwivelUnits.m_ad
 :meth:`SwivelUnits.b_dir_units`, the friction of App. D and :meth:`SwivelUnits.kinetic_energy`,
 written out per unit with scalars (thesis Sec. V-B–D, App. B): numpy's per-call overhead on
 arrays of four units is what keeps the vectorised simulator near real time. The numpy methods stay
-the reference (``tests/test_simulate_jit.py`` compares the two).
+the reference (``tests/test_simulate_jit.py`` compares the two). The functions are compiled into
+the simulator's loop (:func:`ropod_sysid.simulate_jit.run`, cached with it) and have no Python
+wrapper of their own (``no_cpython_wrapper=True``): they are not called from Python.
 
 Arrays (:func:`arrays`):
 
@@ -44,7 +46,7 @@ def arrays(units: SwivelUnits, params: Mapping[str, float], variant: str
     return geo, np.concatenate([inertial, friction])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _point(r0: float, r1: float, c_i: float, s_i: float, w_i: float, rd_ib0: float,
            rd_ib1: float, sp0: float, sp1: float, b_ib0: float, b_ib1: float, at0: float,
            at1: float, at2: float, bt: float) -> tuple:
@@ -62,7 +64,7 @@ def _point(r0: float, r1: float, c_i: float, s_i: float, w_i: float, rd_ib0: flo
     return vel0, vel1, a00, a01, a02, a10, a11, a12, b0, b1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def _wheel(pt: tuple, c_i: float, s_i: float, w_i: float, r_w: float) -> tuple:
     """A wheel's φ̈ = a_φ q̈_b + b_φ (eq. 30: φ̈ = (e_x·r̈_w + θ̇_i e_y·ṙ_w) / R_w) and its rate
     φ̇ (11) from its centre's parametrisation ``pt`` (:func:`_point`): (a_φ (3), b_φ, φ̇)."""
@@ -72,7 +74,7 @@ def _wheel(pt: tuple, c_i: float, s_i: float, w_i: float, r_w: float) -> tuple:
             (c_i * pt[0] + s_i * pt[1]) / r_w)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def dynamics(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarray,
              qd: np.ndarray, ang: np.ndarray, m: np.ndarray, b: np.ndarray, btau: np.ndarray,
              tauf: np.ndarray, ff: np.ndarray, arate: np.ndarray, crate: np.ndarray) -> None:
@@ -165,7 +167,7 @@ def dynamics(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, ic: np.ndarray, q
         arate[ia[3 * i + 2]] = wr[4]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def actuator_rates(geo: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, ang: np.ndarray, crate: np.ndarray) -> None:
     """Wheel rates the base motion asks for at the current pivot angles, into ``crate`` (A,):
@@ -186,7 +188,7 @@ def actuator_rates(geo: np.ndarray, ia: np.ndarray, ic: np.ndarray, q: np.ndarra
         crate[ic[2 * i + 1]] = (fwd + half) / r_w
 
 
-@njit(cache=True, error_model="numpy")
+@njit(no_cpython_wrapper=True, error_model="numpy")
 def kinetic_energy(geo: np.ndarray, par: np.ndarray, ia: np.ndarray, q: np.ndarray,
                    qd: np.ndarray, ang: np.ndarray) -> float:
     """Σ_i ½ m_wh |ṙ_icm|² + ½ J_zz,wh θ̇_i² + ½ J_rot,w Σ_w φ̇_iw² [J] (App. C; 9b, 8a, 11)."""
