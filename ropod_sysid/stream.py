@@ -65,6 +65,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.grid import _Grid, _OffGrid, _Samples
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import piece_name, piece_note, split_chunks
+from ropod_sysid.lowpass import butter2_lowpass
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState
 from ropod_sysid.params import DynamicParameters, Friction, friction_of, parameter_names
@@ -90,7 +91,6 @@ from ropod_sysid.regressor import (
     smooth,
     smoother_note,
 )
-from ropod_sysid.signals import butter2_lowpass
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
     FORCE_THRESHOLD,

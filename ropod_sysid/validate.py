@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ropod_sysid import signals
 from ropod_sysid.io.log import Log
+from ropod_sysid.lowpass import lowpass
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import DynamicParameters, friction_of
 from ropod_sysid.platform import Platform
@@ -69,7 +69,7 @@ def disturbance_estimate(model: PlatformModel, pre: Preprocessed, params: Dynami
     at = row_inputs(pre, idx, step)
     st = model.state(at.q, at.qd, at.angles, at.angle_rates)
     f_b = model.disturbance(st, params, at.qdd, at.tau, friction_of(params))
-    f_hat = signals.lowpass(f_b, pre.dt * step, cutoff_hz)
+    f_hat = lowpass(f_b, pre.dt * step, cutoff_hz)
     keep = (idx >= pre.trim) & (idx < n - pre.trim)
     return pre.t[idx[keep]], f_hat[keep]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ropod_sysid.lowpass import butter2_lowpass, lowpass
 from ropod_sysid.signals import (
-    butter2_lowpass,
     central_difference,
     five_point_difference,
     is_uniform,
@@ -15,7 +15,6 @@ from ropod_sysid.signals import (
     loess_end_weights,
     loess_kernel,
     loess_span_samples,
-    lowpass,
     resample_uniform,
     rloess,
 )
