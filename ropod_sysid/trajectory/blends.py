@@ -194,19 +194,18 @@ class _Plan:
 
 def _sample(segs: Sequence[Sequence], t: np.ndarray) -> np.ndarray:
     """The twist (N, 3) of a program at times t (zero after its end)."""
-    durs = np.array([s[2] for s in segs])
+    durs = np.array([s[2] for s in segs], float)
     ends = np.cumsum(durs)
     starts = ends - durs
     idx = np.searchsorted(ends, t, side="right")
-    out = np.zeros((len(t), 3))
-    for j in np.unique(idx):
-        if j >= len(segs) or durs[j] <= 0:
-            continue
-        a, b, dur = segs[j]
-        m = idx == j
-        s, _, _ = _quintic((t[m] - starts[j]) / dur)
-        out[m] = a + np.outer(s, b - a)
-    return out
+    inside = idx < len(segs)
+    j = np.minimum(idx, len(segs) - 1)
+    a = np.array([s[0] for s in segs], float).reshape(len(segs), 3)
+    d = np.array([s[1] for s in segs], float).reshape(len(segs), 3) - a
+    inside &= durs[j] > 0
+    tau = np.where(inside, (t - starts[j]) / np.where(durs[j] > 0, durs[j], 1.0), 0.0)
+    s, _, _ = _quintic(tau)
+    return np.where(inside[:, None], a[j] + s[:, None] * d[j], 0.0)
 
 
 def _path(segs: Sequence[Sequence], theta0: float, p0: np.ndarray, dt: float,
