@@ -143,6 +143,9 @@ class FitResult:
     input_delay: float
     physical: Solution | None = None
     physical_rms: dict[str, float] | None = None
+    # the counts detected in the logs whose gram corrected the delay search's criterion (not
+    # the fit: --input-delay auto without --encoder-counts, _delay_search); () for none
+    search_counts: tuple[int, ...] = ()
 
     @property
     def names(self) -> list[str]:
@@ -249,6 +252,8 @@ class FitResult:
             "row_step": self.options.row_step or "auto",
             "weight_rotation": [lf.weight for lf in self.logs],
             "input_delay_s": self.input_delay,
+            **({"input_delay_search_counts": list(self.search_counts)}
+               if self.search_counts else {}),
             **({"control_period_s": self.options.control_period}
                if self.options.control_period else {}),
             **({"encoder_counts": self.options.encoder_counts,
@@ -529,11 +534,13 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
             enc = platform.layout.encoders
-            note = counts_note(log.source, detect_encoder_counts(
-                log.angles[:, enc], np.asarray(platform.layout.wrapped)[enc]),
-                options.encoder_counts, isinstance(delay, DelayBracket), model.constrained)
+            detected = detect_encoder_counts(log.angles[:, enc],
+                                             np.asarray(platform.layout.wrapped)[enc])
+            note = counts_note(log.source, detected, options.encoder_counts, model.constrained)
+            search = detected if isinstance(delay, DelayBracket) else None  # (as the stream's)
             out.append((log.source, triangles(model, pre, options.friction,
-                                              encoder_counts=options.encoder_counts),
+                                              encoder_counts=options.encoder_counts,
+                                              search_counts=search),
                         pre.notes + ([note] if note else []), None))
         return out
 
@@ -587,18 +594,61 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         return _fit(reduce, platform, options)
 
 
+def search_counts_note(systems: Sequence[Triangles]) -> str | None:
+    """The delay search's note on the encoder counts detected in the logs (``--input-delay
+    auto`` without ``--encoder-counts``; :func:`_delay_search`): that its criterion was
+    corrected for them, or, when only some logs' angles move by whole counts, that it was
+    not. None when no log's do."""
+    counts = [s.error_counts for s in systems]
+    if not any(counts):
+        return None
+    if all(counts):
+        shown = sorted(set(counts))  # type: ignore[type-var]
+        n = "/".join(map(str, shown))
+        return (f"--input-delay auto: the search corrected its criterion for the quantisation "
+                f"of the {n}-count encoders the angles move by, as --encoder-counts {n} does "
+                "(uncorrected, their errors in the accelerations move the delay found later); "
+                "the fit at that delay is not corrected: give --encoder-counts "
+                f"{shown[0] if len(shown) == 1 else 'N'} for that too")
+    return ("--input-delay auto: the angles of only some logs move by whole counts, so the "
+            "search's criterion is not corrected for the encoders' quantisation, whose errors "
+            "in the accelerations can move the delay found later; give --encoder-counts to "
+            "correct it")
+
+
 def _delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
-                  ) -> tuple[list[tuple[str, Triangles, list[str], LogPlot | None]], float]:
+                  ) -> tuple[list[tuple[str, Triangles, list[str], LogPlot | None]], float,
+                             tuple[int, ...]]:
     """``--input-delay auto``: one pass forms b_ID at the node delays of the bracket ±top
     (:class:`ropod_sysid.regressor.DelayBracket`, top = ``max_delay``, at most one span);
     the weighted residual variance at the nodes gives the delay by a parabola through the
     smallest (:func:`parabola_vertex`), and the triangles of that delay follow from the
     nodes' (:meth:`Triangles.at_delay`): no further pass over the logs. An optimum at the
-    bracket's end gets a note. Returns the logs' pieces at that delay and the delay."""
+    bracket's end gets a note. Returns the logs' pieces at that delay, the delay and the
+    detected counts its criterion was corrected for (() for none).
+
+    The criterion is the residual variance of the fit the logs get: corrected for the
+    encoders' errors in A with ``--encoder-counts`` (:func:`corrected_triangle`, its ρ²:
+    :func:`corrected_factor`). Without it, when every log's angles move by whole counts of
+    2π/N (:func:`ropod_sysid.noise.detect_encoder_counts`, on each log's first chunk), the
+    pass formed the gram of the detected N (that of ``--encoder-counts N``, on the search's
+    sparser rows: :func:`ropod_sysid.noise.search_gram_stride`) and the criterion is corrected
+    all the same, so that the delay found is the one ``--encoder-counts N`` finds (within
+    0.02 ms where measured): the plain fit's residual is least where b_ID lines up with the
+    columns the encoders' errors blur, later than the true lag (docs/method.md). The fit at
+    that delay stays as asked, uncorrected; a note says what the search did
+    (:func:`search_counts_note`). When only some logs' angles move by whole counts the
+    criterion stays uncorrected (a note says so)."""
     top = min(options.max_delay, options.span.value) if options.span.seconds \
         else options.max_delay
     wide = reduce(DelayBracket(top), True)
     systems = [tri for _, tri, _, _ in wide]
+    detecting = options.encoder_counts is None  # then a gram is of counts detected in a log
+    note = search_counts_note(systems) if detecting else None
+    if detecting and not all(s.error_counts for s in systems):
+        systems = [replace(s, error_gram=None, error_counts=None) for s in systems]
+    detected = tuple(sorted({s.error_counts for s in systems if s.error_counts})) \
+        if detecting else ()
 
     def cost(d: float) -> float:
         sol, _ = fit_systems([s.at_delay(d, stretches=False) for s in systems], names,
@@ -610,18 +660,22 @@ def _delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
     costs = np.array([cost(float(d)) for d in nodes])
     delay = parabola_vertex(nodes, costs)
     out = []
-    for source, s, notes, plot in wide:
+    for (source, _, notes, plot), s in zip(wide, systems, strict=True):
         at = s.at_delay(delay)
+        if detecting:  # the fit itself as asked: uncorrected
+            at = replace(at, error_gram=None, error_counts=None)
         if plot is not None and plot.b_rows.ndim == 3:
             w = node_weights(s.delays, delay, s.delay_order)  # type: ignore[arg-type]
             plot = replace(plot, b_rows=plot.b_rows @ w)
         out.append((source, at, notes, plot))
+    if note:
+        out[0][2].append(note)
     if abs(delay) >= top - 2e-4:
         out[0][2].append(f"--input-delay auto: the best delay, {1000 * delay:+.2f} ms, is at "
                          f"the end of the bracket ±{1000 * top:.0f} ms searched: the lag may be "
                          "longer, or the residual hardly depends on it; give a delay in seconds "
                          "to check")
-    return out, delay
+    return out, delay, detected
 
 
 def hold_delay(control_period: float) -> float:
@@ -654,8 +708,9 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     names = model.parameter_names(options.friction)
     check_fixed(options.fix, names)  # before the logs are read
     delay = 0.0
+    detected: tuple[int, ...] = ()
     if options.input_delay == "auto":
-        reduced, delay = _delay_search(reduce, names, options)
+        reduced, delay, detected = _delay_search(reduce, names, options)
     else:
         # a torque held by the drives over a control period acts, on average, half a period
         # after the instant it is logged at (zero-order hold)
@@ -670,7 +725,7 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     per_log = [LogFit(source, tri.samples, w, tri.rms(solution.values), notes, tri, plot)
                for (source, tri, notes, plot), w in zip(reduced, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log,
-                       combined_rms(systems, solution.values), delay)
+                       combined_rms(systems, solution.values), delay, search_counts=detected)
     if options.physical:
         r = corrected_triangle(systems, weights)
         rows = 3 * sum(s.equations for s in systems)

@@ -57,7 +57,8 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.regressor import DEFAULT_SPAN_S, RowGrid
 
 __all__ = ["MotionRows", "SensorNoise", "encoder_variance", "fit_error_gram", "planned_rows",
-           "predicted_fit_std", "recipe_error_gram", "row_kernel", "row_variances", "sigma_hat"]
+           "predicted_fit_std", "recipe_error_gram", "row_kernel", "row_variances",
+           "search_gram_stride", "sigma_hat"]
 
 
 @dataclass(frozen=True)
@@ -351,6 +352,31 @@ def gram_stride(span_rows: int) -> int:
     to 1.07σ at stride 6 (a Coulomb column's tanh is steep where a rate crosses zero, and a
     row there can carry 60 % of its gram)."""
     return max(1, int(span_rows) // GRAM_ROWS_PER_SPAN)
+
+
+# the delay search's gram of counts detected in a log (not given): on every this-many-th of the
+# rows the fit's gram uses (search_gram_stride)
+SEARCH_GRAM_SPARSER = 4
+
+
+def search_gram_stride(span_rows: int) -> int:
+    """Every how many equation rows the delay search (``--input-delay auto`` without
+    ``--encoder-counts``) evaluates the error gram of the counts it detected in a log
+    (:func:`detect_encoder_counts`): :data:`SEARCH_GRAM_SPARSER` × :func:`gram_stride`, about
+    one row per smoother span. The search's criterion needs E only where it moves the
+    residual with the delay, and the fit at the delay found is not corrected. Measured against
+    ``--encoder-counts 16384`` (the fit's stride): the delay found within 0.02 ms on the
+    shipped ropod, omni, steered and legs samples (ropod +0.47 against +0.46 ms; at strides
+    1–14 of its 11-row spans 0.45–0.48 ms) and on ``benchmarks/bias.py``'s off-square runs at
+    100 / 200 / 1000 Hz, unshifted and shifted 5 ms, four logs and one; sparser (6×, 8×) the
+    1 kHz runs below jump. The gram takes a quarter of the fit's time (the shipped sample:
+    0.28 s for the four logs, against 1.2 s), which keeps ``--input-delay auto`` near 1.5× a
+    plain fit there (``benchmarks/delay.py``). Where the corrected residual is nearly all the
+    encoders' share (``benchmarks/delay.py``'s 1 kHz runs: ρ² at the best node 1/1.9 and 1/23
+    of its neighbours') the criterion hangs on E's last percent, and the delay found moves
+    between −2.4 and +2.5 ms with the stride, the fit's own (−2.30 ms) and every row
+    (−2.13 ms) included; here −2.32 ms."""
+    return SEARCH_GRAM_SPARSER * gram_stride(span_rows)
 
 
 def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts: int,
@@ -657,23 +683,20 @@ def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None)
 
 
 def counts_note(source: str, detected: int | None, given: int | None,
-                delay_search: bool = False, constrained: bool = False) -> str | None:
+                constrained: bool = False) -> str | None:
     """The note on a log whose angles move by whole counts of its encoders
     (:func:`detect_encoder_counts`) when the fit was not told them, or was told others.
-    ``delay_search``: the fit searches the input delay (``--input-delay auto``), whose
-    criterion the same errors bias (docs/method.md). ``constrained``: a platform whose
-    constraint forces the fit projects out (steered wheels, legs), where the correction was
-    measured to over-correct on three of four simulated platforms (README)."""
+    ``constrained``: a platform whose constraint forces the fit projects out (steered wheels,
+    legs), where the correction was measured to over-correct on three of four simulated
+    platforms (README). (What ``--input-delay auto`` did with the counts is the search's own
+    note: :func:`ropod_sysid.fit.search_counts_note`.)"""
     if detected is None or detected == given:
         return None
     if given is None:
-        delay = ("; and they move the delay --input-delay auto finds later (the residual of "
-                 "the uncorrected fit is least there)") if delay_search else ""
         check = ("; on a platform with steered wheels or legs it can over-correct: compare "
                  "the two fits") if constrained else ""
         return (f"{source}: the angles move by whole counts of 2π/{detected}; give "
                 f"--encoder-counts {detected} to correct the fit for the encoders' "
-                f"quantisation (its errors in the accelerations shrink the values{delay})"
-                f"{check}")
+                f"quantisation (its errors in the accelerations shrink the values){check}")
     return (f"{source}: the angles move by whole counts of 2π/{detected}, not of the "
             f"--encoder-counts {given} given; check the encoders' resolution")

@@ -668,19 +668,25 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: in
 
 
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
-              chunk: int = 20000, encoder_counts: int | None = None) -> Triangles:
+              chunk: int = 20000, encoder_counts: int | None = None,
+              search_counts: int | None = None) -> Triangles:
     """The log's QR triangles per DOF, built block by block (memory bounded by ``chunk``);
     with ``encoder_counts`` also the encoders' error gram of A
-    (:func:`ropod_sysid.noise.fit_error_gram`)."""
+    (:func:`ropod_sysid.noise.fit_error_gram`); else with ``search_counts`` (the counts
+    detected in the log, for ``--input-delay auto``'s criterion alone) the gram of those on
+    the search's sparser rows (:func:`ropod_sysid.noise.search_gram_stride`)."""
     tri: Triangles | None = None
     per = pre.grid.stretch_rows(pre.dt)
+    counts = encoder_counts or search_counts
     for idx, a, b in system(model, pre, friction, chunk):
         row0 = (int(idx[0]) - pre.trim) // pre.grid.step
         block = block_triangles(a, b, pre.source, row0, per)
-        if encoder_counts:
-            from ropod_sysid.noise import fit_error_gram
+        if counts:
+            from ropod_sysid.noise import fit_error_gram, search_gram_stride
 
-            block.error_gram = fit_error_gram(model, pre, idx, encoder_counts, friction, row0)
+            stride = None if encoder_counts else search_gram_stride(pre.grid.span)
+            block.error_gram = fit_error_gram(model, pre, idx, counts, friction, row0, stride)
+            block.error_counts = counts
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")

@@ -145,6 +145,9 @@ class Triangles:
     # E[δA_dᵀ δA_d] (3, p, p) of the encoders' errors in A (fit --encoder-counts), or None
     error_gram: np.ndarray | None = field(default=None, repr=False)
     per_row: tuple[int, int, int] = (1, 1, 1)  # rows of each kind per sample (row_kinds)
+    # the encoders' counts per revolution error_gram is for: given (--encoder-counts) or, for
+    # the delay search alone, detected in the log (ropod_sysid.noise.detect_encoder_counts)
+    error_counts: int | None = None
 
     @property
     def equations(self) -> int:
@@ -165,7 +168,8 @@ class Triangles:
                          self.correlation, self.duration + other.duration,
                          self._joined_stretches(other), self.stretch_rows or other.stretch_rows,
                          self.delays, self.delay_order, self.idle + other.idle,
-                         _sum_grams(self.error_gram, other.error_gram), self.per_row)
+                         _sum_grams(self.error_gram, other.error_gram), self.per_row,
+                         self.error_counts or other.error_counts)
 
     def at_delay(self, delay: float, stretches: bool = True) -> Triangles:
         """The triangles of one delay [s] from those of the node delays (:attr:`delays`): b_ID
@@ -183,7 +187,8 @@ class Triangles:
         st = [t.T @ s @ t for s in self.stretches] if stretches else []
         return Triangles(r, self.rows, self.label, self.samples, self.correlation,
                          self.duration, st, self.stretch_rows, idle=self.idle,
-                         error_gram=self.error_gram, per_row=self.per_row)
+                         error_gram=self.error_gram, per_row=self.per_row,
+                         error_counts=self.error_counts)
 
     def _joined_stretches(self, other: Triangles) -> list[np.ndarray]:
         """The stretches of ``other`` (the rows after this block's) after this block's: when

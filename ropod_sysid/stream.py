@@ -22,7 +22,11 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
    (:class:`ropod_sysid.solve.Triangles`; a block ending inside a stretch leaves it to the
    next). With ``--input-delay auto`` b_ID is formed for each node delay of the bracket
    (:class:`ropod_sysid.regressor.DelayBracket`), the window reaching back and ahead by the
-   largest delays.
+   largest delays; without ``--encoder-counts``, when the first chunk's angles move by whole
+   counts (:func:`ropod_sysid.noise.detect_encoder_counts`), also the error gram of those
+   counts (:func:`ropod_sysid.noise.fit_error_gram`, on the search's sparser rows:
+   :func:`ropod_sysid.noise.search_gram_stride`), for the search's criterion alone
+   (:func:`ropod_sysid.fit._delay_search`).
 
 Every sample's value is computed from the same neighbours by the same formula as in one pass,
 so the triangles equal the in-memory ones to rounding (the FFT convolution of long windows is
@@ -149,6 +153,9 @@ class _Blocks:
                  plot: bool = False, encoder_counts: int | None = None) -> None:
         self.platform = platform
         self.encoder_counts = encoder_counts
+        # --input-delay auto without encoder_counts: the counts detected on the first chunk
+        # (_Run.push), whose gram corrects the search's criterion alone (fit._delay_search)
+        self.search_counts: int | None = None
         self.model = PlatformModel(platform)
         self.k_t = platform.torque_constants()
         self.span = span
@@ -315,12 +322,15 @@ class _Blocks:
                                   pre.angles[rows], pre.angle_rates[rows], pre.tau[rows])
         row0 = (pa + first - self.trim) // self.grid.step  # the log's row number of the first
         block = block_triangles(a, b, self.source, row0, self.grid.stretch_rows(self.dt))
-        if self.encoder_counts:
-            from ropod_sysid.noise import fit_error_gram
+        counts = self.encoder_counts or self.search_counts
+        if counts:  # (as regressor.triangles)
+            from ropod_sysid.noise import fit_error_gram, search_gram_stride
 
             rows = first + self.grid.step * np.arange(count)
-            block.error_gram = fit_error_gram(self.model, pre, rows, self.encoder_counts,
-                                              self.friction, row0)
+            stride = None if self.encoder_counts else search_gram_stride(self.grid.span)
+            block.error_gram = fit_error_gram(self.model, pre, rows, counts, self.friction,
+                                              row0, stride)
+            block.error_counts = counts
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
@@ -374,12 +384,14 @@ class _Run:
 
             self.t0 = float(log.t[0])
             enc = log.layout.encoders
-            note = counts_note(self.name, detect_encoder_counts(
-                log.angles[:, enc], np.asarray(log.layout.wrapped)[enc]),
-                self.blocks.encoder_counts, self.blocks.bracket is not None,
-                self.blocks.model.constrained)
+            detected = detect_encoder_counts(log.angles[:, enc],
+                                             np.asarray(log.layout.wrapped)[enc])
+            note = counts_note(self.name, detected, self.blocks.encoder_counts,
+                               self.blocks.model.constrained)
             if note is not None:
                 self.notes.append(note)
+            if self.blocks.bracket is not None and self.blocks.encoder_counts is None:
+                self.blocks.search_counts = detected  # before the first block is reduced
         self.raw += log.n_samples
         self.t1 = float(log.t[-1])
         self.notes.extend(n for n in log.notes if n not in self.notes)  # (MCAP damage: last)

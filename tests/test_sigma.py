@@ -179,17 +179,51 @@ def test_input_delay_auto_on_noisy_logs_with_the_encoder_correction(off_square,
     assert found == pytest.approx(0.0055, abs=5e-4)
 
 
-def test_delay_search_on_quantised_logs_notes_the_encoder_correction(off_square,
-                                                                     runs_off_square_noisy):
-    """Without --encoder-counts the encoders' errors in A move the delay found (+1.34 ms on
-    these runs, against 0.43 ms corrected): the counts note says so when the fit searches."""
-    logs = [runs_off_square_noisy[0]]
+def test_delay_search_on_quantised_logs_corrects_for_the_detected_counts(off_square,
+                                                                         runs_off_square_noisy):
+    """Without --encoder-counts the encoders' errors in A moved the delay found later (on this
+    run +1.34 ms, and +6.34 ms for currents shifted by 5 ms; −0.03 and +4.97 ms with the
+    counts): the search now forms the gram of the counts the angles move by and finds what
+    --encoder-counts finds (−0.02, +4.98 ms). The fit at that delay stays plain, as asked,
+    and the notes say what the search did; the stream forms the same gram as the whole log."""
+    log = runs_off_square_noisy[0]
+    found = []
+    for shift in (0.0, 0.005):
+        logs = [shifted_currents(log, shift) if shift else log]
+        auto = fit_logs(logs, off_square, FitOptions(input_delay="auto"))
+        counted = fit_logs(logs, off_square, FitOptions(input_delay="auto", encoder_counts=2**14))
+        assert auto.input_delay == pytest.approx(counted.input_delay, abs=1e-4)
+        found.append(auto.input_delay)
+    assert abs(found[0]) < 1e-3 and found[1] - found[0] == pytest.approx(0.005, abs=5e-4)
+    # the last (shifted) one: plain at its delay, and noted
+    fixed = fit_logs(logs, off_square, FitOptions(input_delay=auto.input_delay))
+    np.testing.assert_allclose(auto.solution.values, fixed.solution.values, rtol=1e-8)
+    assert auto.logs[0].triangles.error_gram is None
+    notes = auto.logs[0].notes
+    assert any("give --encoder-counts 16384 to correct the fit" in n for n in notes)
+    assert any("the search corrected its criterion for the quantisation of the 16384-count "
+               "encoders" in n for n in notes)
+    assert not any("--input-delay auto" in n for n in fixed.logs[0].notes)
+    extras = auto.parameter_file().extras
+    assert extras["input_delay_search_counts"] == [2**14] and "encoder_counts" not in extras
+    # streamed in chunks: the gram of the same rows (the search's stride) as the whole log's
+    model = PlatformModel(off_square)
+    whole = triangles(model, preprocess(log, off_square, None, DelayBracket(0.02)),
+                      search_counts=2**14)
+    streamed = stream_log(log, off_square, input_delay=DelayBracket(0.02), chunk=97).triangles
+    assert streamed.error_counts == whole.error_counts == 2**14
+    np.testing.assert_allclose(streamed.error_gram, whole.error_gram, rtol=1e-7)
+
+
+def test_delay_search_on_partly_quantised_logs_stays_uncorrected(off_square, runs_off_square,
+                                                                 runs_off_square_noisy):
+    """Only some logs' angles move by whole counts: the search keeps the plain criterion
+    (today's), and says so."""
+    logs = [runs_off_square_noisy[0], runs_off_square[1].log]
     auto = fit_logs(logs, off_square, FitOptions(input_delay="auto"))
-    fixed = fit_logs(logs, off_square, FitOptions(input_delay=0.0005))
-    moved = "they move the delay --input-delay auto finds later"
-    assert any("--encoder-counts 16384" in n and moved in n for n in auto.logs[0].notes)
-    assert any("--encoder-counts 16384" in n for n in fixed.logs[0].notes)
-    assert not any(moved in n for n in fixed.logs[0].notes)
+    assert any("the angles of only some logs move by whole counts" in n
+               for n in auto.logs[0].notes)
+    assert all(lf.triangles.error_gram is None for lf in auto.logs)
 
 
 def test_input_delay_auto_equals_the_fit_at_its_delay(off_square, runs_off_square):
