@@ -45,12 +45,17 @@ simulate(pf, thesis_fixed_masses(pf.unit_names), Setpoints(t, 0.1 + 0 * t, 0 * t
 _WARM_UP = pytest.StashKey[subprocess.Popen]()  # the process running WARM_UP
 
 
+_CONFIG: pytest.Config | None = None
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """With test workers, the controller (idle while they test) starts a process that compiles
     the simulator's loop at once: on a clean clone (no numba cache yet) the workers would each
     compile it, at the same time, about 11 s each. A worker that needs the loop before the cache
     is written waits for it (:func:`ropod_sysid.simulate_jit.first_compile`), then loads it;
     until then the workers collect and run other tests. On a warm cache it only loads it."""
+    global _CONFIG
+    _CONFIG = config
     if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", 0):
         return
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
@@ -65,6 +70,45 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     if proc is not None and proc.poll() is None:
         proc.kill()
         proc.wait()
+
+
+# Test files in the order the workers take them: longest first (the files' seconds in
+# tests/durations.json), so that no long file is left for one worker at the end while the other
+# idles. `ROPOD_TEST_DURATIONS=write python -m pytest` measures and rewrites the table.
+DURATIONS = Path(__file__).resolve().parent / "durations.json"
+_SPENT = pytest.StashKey[dict[str, float]]()  # seconds per test file, summed on the controller
+
+
+def _file_of(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0].rsplit("/", 1)[-1]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Order the files longest first (stable: the tests of a file keep their order). A file
+    missing from the table (new) goes first: it may be long, and a short one first costs
+    nothing. Used with ``--no-loadscope-reorder``, which keeps this order."""
+    try:
+        seconds = json.loads(DURATIONS.read_text())
+    except (OSError, ValueError):
+        return
+    items.sort(key=lambda item: -seconds.get(_file_of(item.nodeid), float("inf")))
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    """Sum each file's setup, call and teardown seconds (for ``ROPOD_TEST_DURATIONS=write``)."""
+    if os.environ.get("ROPOD_TEST_DURATIONS") != "write" or _CONFIG is None:
+        return
+    spent = _CONFIG.stash.setdefault(_SPENT, {})
+    name = _file_of(report.nodeid)
+    spent[name] = spent.get(name, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Write the files' seconds to :data:`DURATIONS` (on the controller, after a whole run)."""
+    spent = session.config.stash.get(_SPENT, None)
+    if spent and not os.environ.get("PYTEST_XDIST_WORKER"):
+        table = {k: round(v, 1) for k, v in sorted(spent.items(), key=lambda kv: -kv[1])}
+        DURATIONS.write_text(json.dumps(table, indent=1) + "\n")
 
 
 def shipped(name: str) -> tuple[Platform, Parameters, list[Log]]:
