@@ -166,9 +166,10 @@ def test_input_delay_auto_finds_small_and_negative_delays(off_square, runs_off_s
 
 def test_input_delay_auto_on_noisy_logs_with_the_encoder_correction(off_square,
                                                                    runs_off_square_noisy):
-    """With 2¹⁴-count encoders and 30 mA the encoders' errors in A bias the delay search (a
-    plain fit finds +1.34 ms, and 6.34 ms for a 5 ms shift); with ``encoder_counts`` the cost
-    is that of the corrected fit: +0.43 ms (the simulator's hold is 0.5 ms) and 5.43 ms."""
+    """With 2¹⁴-count encoders and 30 mA the encoders' errors in A bias the delay search (an
+    uncorrected criterion finds +1.34 ms, and 6.34 ms for a 5 ms shift); with
+    ``encoder_counts`` the cost is that of the corrected fit: +0.51 ms (the simulator's hold is
+    0.5 ms) and 5.51 ms (benchmarks/bias.py --part delay, at 200 Hz)."""
     logs = list(runs_off_square_noisy)
     opts = FitOptions(input_delay="auto", encoder_counts=2**14)
     none = fit_logs(logs, off_square, opts).input_delay
