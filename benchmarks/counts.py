@@ -2,15 +2,25 @@
 """The encoders' error gram ``fit --encoder-counts`` subtracts, against the measured one (issue 14).
 
     python benchmarks/counts.py steered-four [--logs 2] [--first 0] [--offsets] [--prototype]
+    python benchmarks/counts.py ropod [--duration 60] [--rate 100] [--seed 0]
+    python benchmarks/counts.py ropod-off [--duration 30] [--rate 1000] [--jitter 0.0005]
 
-A shipped dataset of exact logs (steered-four, steered-swivel, legs-exact) is quantised to
-2¹⁴ counts (:func:`ropod_sysid.simulate.sensed`, no current noise; ``--offsets``: with the
-encoders' zeros at random) and both are preprocessed alike; the empirical E[δAᵀδA] is the
-Gram matrix of the filtered rows' difference A_quantised − A_exact (the rows the fit uses),
-the predicted one :func:`ropod_sysid.noise.fit_error_gram` at the quantised log (or, with
-``--prototype``, :func:`chain_gram`). Prints per row kind (x, y, θ with the units' own rows)
-and inertial column the ratio predicted / empirical of the diagonal and of (E m)_j, the
-column's share of the bias −(AᵀA)⁻¹ E m.
+A shipped dataset of exact logs (steered-four, steered-swivel, legs-exact) is quantised to 2¹⁴
+counts (:func:`ropod_sysid.simulate.sensed`, no current noise; ``--offsets``: with the
+encoders' zeros at random; ``--jitter J``: the samples taken at instants jittered uniformly by
+±J s, as the shipped ropod's, seed 2021) and both are preprocessed alike; the empirical
+E[δAᵀδA] is the Gram matrix of the filtered rows' difference A_quantised − A_exact (the rows
+the fit uses), the predicted one :func:`ropod_sysid.noise.fit_error_gram` at the quantised log
+(or, with ``--prototype``, :func:`chain_gram`). Prints per row kind (x, y, θ with the units'
+own rows) and inertial column the ratio predicted / empirical of the diagonal and of (E m)_j,
+the column's share of the bias −(AᵀA)⁻¹ E m.
+
+``ropod`` and ``ropod-off`` are simulated here instead, exact: the four variants of a
+``trajectory typical`` run (``--duration``, ``--seed``) of the thesis's ropod (``ropod``: the
+shipped sample's platform and truth, whose run is 60 s at 100 Hz) or of the off-square one
+(attachment points of ``tests/conftest.py``), logged at ``--rate``. For these the bias of
+each inertial value (of the combination a rank-deficient fit keeps) from the empirical and
+the predicted gram is printed too, −(ÃᵀÃ)⁻¹ Ẽ m as a fraction of the value (:func:`bias`).
 
 :func:`chain_gram` is the prototype of :func:`ropod_sysid.noise.recipe_error_gram` (which
 ``fit_error_gram`` now uses, to first order and about 20× faster): the error sources are each
@@ -128,9 +138,13 @@ def chain_gram(model: PlatformModel, pre: Preprocessed, index: np.ndarray, count
     return kind_grams(per_dof)
 
 
-def quantised(log: Log, platform: object, rng: np.random.Generator | None) -> Log:
-    """The log's angles as 2¹⁴-count encoders record them; with ``rng`` their zeros at
-    random."""
+def quantised(log: Log, platform: object, rng: np.random.Generator | None,
+              jitter: float = 0.0) -> Log:
+    """The log's angles as 2¹⁴-count encoders record them (``jitter``: at instants jittered
+    by ±jitter s, as :func:`sensed`, seed 2021); with ``rng`` their zeros at random."""
+    if jitter > 0:
+        return sensed(log, platform, Sensors(encoder_counts=COUNTS, jitter=jitter),  # type: ignore[arg-type]
+                      np.random.default_rng(2021))
     if rng is None:
         return sensed(log, platform, Sensors(encoder_counts=COUNTS), np.random.default_rng(0))  # type: ignore[arg-type]
     step = 2 * np.pi / COUNTS
@@ -141,6 +155,25 @@ def quantised(log: Log, platform: object, rng: np.random.Generator | None) -> Lo
     return Log(log.t, log.layout, a, log.currents, None, log.source, [])
 
 
+def simulated(name: str, duration: float, rate: float, seed: int
+              ) -> tuple[object, object, list[Log]]:
+    """The exact logs of the four variants of a typical run of the ropod (``ropod``: the
+    shipped sample's; ``ropod-off``: attachment points off the square)."""
+    from ropod_sysid.params import thesis_fixed_masses
+    from ropod_sysid.platform import ropod_platform
+    from ropod_sysid.simulate import simulate
+    from ropod_sysid.trajectory import typical, variants
+    from tests.conftest import OFF_SQUARE
+
+    platform = ropod_platform()
+    if name == "ropod-off":
+        platform = platform.with_positions(OFF_SQUARE)
+    truth = thesis_fixed_masses(platform.unit_names)
+    runs = variants(typical(duration=duration, platform=platform, seed=seed))
+    res = simulate(platform, truth, [tr.to_setpoints() for tr in runs.values()], rate=rate)
+    return platform, truth, [r.log for r in res]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dataset")
@@ -148,28 +181,42 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=0, help="from this log on (name order)")
     ap.add_argument("--offsets", action="store_true", help="the encoders' zeros at random")
     ap.add_argument("--prototype", action="store_true", help="predict by chain_gram")
+    ap.add_argument("--duration", type=float, default=60.0, help="ropod*: the run [s]")
+    ap.add_argument("--rate", type=float, default=100.0, help="ropod*: the log rate [Hz]")
+    ap.add_argument("--seed", type=int, default=0, help="ropod*: the typical run's seed")
+    ap.add_argument("--jitter", type=float, default=0.0,
+                    help="sample instants jittered by ± this [s] (the shipped ropod: 0.0005)")
     args = ap.parse_args()
-    platform, truth, logs = shipped(args.dataset)
+    if args.dataset.startswith("ropod"):
+        platform, truth, logs = simulated(args.dataset, args.duration, args.rate, args.seed)
+    else:
+        platform, truth, logs = shipped(args.dataset)
     logs = logs[args.first: args.first + args.logs]
     model = PlatformModel(platform)
     names = model.parameter_names()
     m = truth.vector(names)
     p = len(names)
     emp, cross, pred = np.zeros((3, p, p)), np.zeros((3, p)), np.zeros((3, p, p))
+    ata, per_row = np.zeros((3, p, p)), np.zeros(3)
     rng = np.random.default_rng(1) if args.offsets else None
     start = time.perf_counter()
     for log in logs:
-        a_e, _ = filtered_system(model, preprocess(log, platform))
-        pre = preprocess(quantised(log, platform, rng), platform)
+        pre_e = preprocess(log, platform)
+        a_e, _ = filtered_system(model, pre_e)
+        pre = preprocess(quantised(log, platform, rng, args.jitter), platform)
         a_q, _ = filtered_system(model, pre)
         for d in range(3):
             x = kind_rows(a_q - a_e, d)
             emp[d] += x.T @ x
             cross[d] += x.T @ (x @ m)
+            y = kind_rows(a_e, d)
+            ata[d] += y.T @ y
+            per_row[d] = (kind_rows(np.zeros((1,) + a_e.shape[1:]), d)).shape[0]
         gram = chain_gram if args.prototype else fit_error_gram
         pred += gram(model, pre, pre.row_samples(), COUNTS)
     print(f"{args.dataset}: {len(logs)} logs, {'prototype' if args.prototype else 'library'} "
           f"gram, zeros {'at random' if args.offsets else 'at 0'}, "
+          f"{f'jitter ±{args.jitter * 1e3:g} ms, ' if args.jitter else ''}"
           f"{time.perf_counter() - start:.0f} s; predicted / empirical: diagonal, (E m)_j")
     inertial = [j for j, n in enumerate(names) if n.startswith(("m_", "J"))]
     for d, kind in enumerate(("x", "y", "θ+own")):
@@ -177,6 +224,39 @@ def main() -> None:
                  f"{(pred[d, j] @ m) / cross[d, j]:.2f}"
                  for j in inertial if emp[d, j, j] > 0]
         print(f"  {kind:6s} " + "; ".join(cells))
+    if args.dataset.startswith("ropod"):
+        print("  bias −(ÃᵀÃ)⁻¹ Ẽ m / value, empirical → predicted (θ rows weighted as the fit):")
+        print("  " + "; ".join(f"{names[j]} {e:+.2%} → {q:+.2%}" for j, e, q in
+                               zip(inertial, *(bias(ata, g, m, per_row)[inertial]
+                                               for g in (emp, pred)), strict=True)))
+
+
+def bias(ata: np.ndarray, gram: np.ndarray, m: np.ndarray, per_row: np.ndarray) -> np.ndarray:
+    """−(ÃᵀÃ)⁻¹ Ẽ m (p,) over the value (as the fit keeps it: on a rank-deficient problem the
+    last column of each dependent set dropped, and each kept value the combination
+    (Ã_bᵀÃ_b)⁻¹ Ã_bᵀ Ã m), the kinds' grams (3, p, p) summed with the θ kind weighted by
+    Sec. VI-A's w (of the exact rows' b = A m: w² = ½ (mean b_x² + mean b_y²) / mean b_θ², the
+    kinds having ``per_row`` rows per sample); nan for a dropped column."""
+    bx, by, bt = (float(m @ ata[d] @ m) / per_row[d] for d in range(3))
+    w2 = 0.5 * (bx + by) / bt
+    a = ata[0] + ata[1] + w2 * ata[2]
+    e = gram[0] + gram[1] + w2 * gram[2]
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(a), 1e-300))
+
+    def rank(cols: list[int]) -> int:
+        sub = a[np.ix_(cols, cols)] * np.outer(scale[cols], scale[cols])
+        ev = np.linalg.eigvalsh(sub)
+        return int(np.sum(ev > 1e-9 * ev.max()))
+
+    keep = list(range(len(m)))
+    while rank(keep) < len(keep):
+        keep.remove(next(c for c in reversed(keep) if rank([k for k in keep if k != c])
+                         == rank(keep)))
+    out = np.full(len(m), np.nan)
+    ab = a[np.ix_(keep, keep)]
+    value = np.linalg.solve(ab, (a @ m)[keep])
+    out[keep] = -np.linalg.solve(ab, (e @ m)[keep]) / value
+    return out
 
 
 if __name__ == "__main__":
