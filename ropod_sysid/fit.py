@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
@@ -61,7 +61,6 @@ from ropod_sysid.solve import (
     check_rcond,
     combined_rms,
     gram_triangle,
-    node_weights,
     solve,
     stack_triangles,
 )
@@ -70,7 +69,6 @@ if TYPE_CHECKING:
     from ropod_sysid.plotdata import LogPlot
 
 WeightRotation = Literal["auto", "none"] | float
-NODE_FIT = 3  # node delays the delay search fits its parabola to (parabola_vertex)
 
 
 @dataclass
@@ -144,7 +142,7 @@ class FitResult:
     physical: Solution | None = None
     physical_rms: dict[str, float] | None = None
     # the counts detected in the logs whose gram corrected the delay search's criterion (not
-    # the fit: --input-delay auto without --encoder-counts, _delay_search); () for none
+    # the fit: --input-delay auto without --encoder-counts, delay.delay_search); () for none
     search_counts: tuple[int, ...] = ()
 
     @property
@@ -594,178 +592,12 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         return _fit(reduce, platform, options)
 
 
-def search_counts_note(systems: Sequence[Triangles]) -> str | None:
-    """The delay search's note on the encoder counts detected in the logs (``--input-delay
-    auto`` without ``--encoder-counts``; :func:`_delay_search`): that its criterion was
-    corrected for them, or, when only some logs' angles move by whole counts, that it was
-    not. None when no log's do."""
-    counts = [s.error_counts for s in systems]
-    if not any(counts):
-        return None
-    if all(counts):
-        shown = sorted(set(counts))  # type: ignore[type-var]
-        n = "/".join(map(str, shown))
-        return (f"--input-delay auto: the search corrected its criterion for the quantisation "
-                f"of the {n}-count encoders the angles move by, as --encoder-counts {n} does "
-                "(uncorrected, their errors in the accelerations move the delay found later); "
-                "the fit at that delay is not corrected: give --encoder-counts "
-                f"{shown[0] if len(shown) == 1 else 'N'} for that too")
-    return ("--input-delay auto: the angles of only some logs move by whole counts, so the "
-            "search's criterion is not corrected for the encoders' quantisation, whose errors "
-            "in the accelerations can move the delay found later; give --encoder-counts to "
-            "correct it")
-
-
-def _delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
-                  ) -> tuple[list[tuple[str, Triangles, list[str], LogPlot | None]], float,
-                             tuple[int, ...]]:
-    """``--input-delay auto``: one pass forms b_ID at the node delays of the bracket ±top
-    (:class:`ropod_sysid.regressor.DelayBracket`, top = ``max_delay``, at most one span);
-    the weighted residual variance at the nodes gives the delay by a parabola through the
-    smallest (:func:`parabola_vertex`), and the triangles of that delay follow from the
-    nodes' (:meth:`Triangles.at_delay`): no further pass over the logs. An optimum at the
-    bracket's end gets a note. Returns the logs' pieces at that delay, the delay and the
-    detected counts its criterion was corrected for (() for none).
-
-    The criterion is the residual variance of the fit the logs get: corrected for the
-    encoders' errors in A with ``--encoder-counts`` (:func:`corrected_triangle`, its ρ²:
-    :func:`corrected_factor`). Without it, when every log's angles move by whole counts of
-    2π/N (:func:`ropod_sysid.noise.detect_encoder_counts`, on each log's first chunk), the
-    pass formed the gram of the detected N (that of ``--encoder-counts N``, on the search's
-    sparser rows: :func:`ropod_sysid.noise.search_gram_stride`) and the criterion is corrected
-    all the same, so that the delay found is the one ``--encoder-counts N`` finds (within
-    0.02 ms where measured): the plain fit's residual is least where b_ID lines up with the
-    columns the encoders' errors blur, later than the true lag (docs/method.md). The fit at
-    that delay stays as asked, uncorrected; a note says what the search did
-    (:func:`search_counts_note`). When only some logs' angles move by whole counts the
-    criterion stays uncorrected (a note says so)."""
-    top = min(options.max_delay, options.span.value) if options.span.seconds \
-        else options.max_delay
-    wide = reduce(DelayBracket(top), True)
-    systems = [tri for _, tri, _, _ in wide]
-    detecting = options.encoder_counts is None  # then a gram is of counts detected in a log
-    note = search_counts_note(systems) if detecting else None
-    if detecting and not all(s.error_counts for s in systems):
-        systems = [replace(s, error_gram=None, error_counts=None) for s in systems]
-    detected = tuple(sorted({s.error_counts for s in systems if s.error_counts})) \
-        if detecting else ()
-
-    def cost(d: float) -> float:
-        sol, _ = fit_systems([s.at_delay(d, stretches=False) for s in systems], names,
-                             options, calibrate=False)
-        return sol.sigma2
-
-    # the logs' nodes (their sample times may differ by rounding: merged within 1 µs)
-    nodes = np.unique(np.round(np.concatenate([s.delays for s in systems]), 6))  # type: ignore[arg-type]
-    if any(s.error_gram is not None for s in systems):
-        delay = corrected_delay(systems, nodes, names, options)
-    else:
-        delay = parabola_vertex(nodes, np.array([cost(float(d)) for d in nodes]))
-    out = []
-    for (source, _, notes, plot), s in zip(wide, systems, strict=True):
-        at = s.at_delay(delay)
-        if detecting:  # the fit itself as asked: uncorrected
-            at = replace(at, error_gram=None, error_counts=None)
-        if plot is not None and plot.b_rows.ndim == 3:
-            w = node_weights(s.delays, delay, s.delay_order)  # type: ignore[arg-type]
-            plot = replace(plot, b_rows=plot.b_rows @ w)
-        out.append((source, at, notes, plot))
-    if note:
-        out[0][2].append(note)
-    if abs(delay) >= top - 2e-4:
-        out[0][2].append(f"--input-delay auto: the best delay, {1000 * delay:+.2f} ms, is at "
-                         f"the end of the bracket ±{1000 * top:.0f} ms searched: the lag may be "
-                         "longer, or the residual hardly depends on it; give a delay in seconds "
-                         "to check")
-    return out, delay, detected
-
-
-# corrected_delay(): below this ratio of the corrected to the plain residual at the best node
-# the corrected cost is taken as noise (measured: 0.12–0.29 on the off-square runs at 100–1000 Hz
-# and the shipped sample, under 0.001 on benchmarks/delay.py's 1 kHz runs)
-FRAGILE_SHARE = 0.02
-# the fixed point d = g(d) is sought by secant steps on g(d) − d from the plain search's delay;
-# they stop when a step is below DELAY_TOL [s] or after DELAY_STEPS
-DELAY_TOL = 1e-5
-DELAY_STEPS = 12
-
-
-def corrected_delay(systems: Sequence[Triangles], nodes: np.ndarray, names: Sequence[str],
-                    options: FitOptions) -> float:
-    """The input delay [s] of logs whose triangles carry the encoders' error gram.
-
-    The criterion is the corrected fit's own cost, ρ² = ‖b − A m‖² − mᵀE m, at the nodes,
-    and the vertex of the parabola through the least (:func:`parabola_vertex`) — unless ρ² at
-    its least node is under :data:`FRAGILE_SHARE` of the plain residual there: then the
-    encoders' errors are nearly all the residual and ρ² a small difference of large numbers
-    (2¹⁴ counts, four 20 s typical runs at 1 kHz: ρ² clipped near 0, the nodes 5 ms either
-    side 1.9× and 23× it, the vertex 2.8 ms off). There, for values m held fixed, the residual
-    ‖b(d) − A m‖² is a smooth quadratic in the torques' delay d whose expectation at the true
-    m is least at the true delay (the encoders' errors in A do not depend on b's delay). So
-    g(d): the corrected m fitted at d, then the vertex of that residual over the nodes; the
-    delay is the fixed point d = g(d), by secant steps from the plain residual's vertex (the
-    plain fit's values, shrunk by the encoders' errors, are best matched later). It is not the
-    rule everywhere: on the off-square 8 s runs (2¹⁴ counts, 30 mA, 8 noise draws) it finds
-    0.35–0.4 ms less than ρ² and the exact logs at 100 and 200 Hz (docs/method.md)."""
-    plain = [replace(s, error_gram=None) for s in systems]
-
-    def solved(ss: Sequence[Triangles], d: float) -> tuple[Solution, list[float]]:
-        return fit_systems([s.at_delay(d, stretches=False) for s in ss], names, options,
-                           calibrate=False)
-
-    rho2 = np.array([solved(systems, float(d))[0].sigma2 for d in nodes])
-    plain_costs = np.array([solved(plain, float(d))[0].sigma2 for d in nodes])
-    k = int(np.argmin(rho2))
-    if rho2[k] >= FRAGILE_SHARE * plain_costs[k]:
-        return parabola_vertex(nodes, rho2)
-
-    def g(d: float) -> float:
-        sol, weights = solved(systems, d)
-        costs = np.zeros(len(nodes))
-        for s, w in zip(systems, weights, strict=True):
-            scale = np.array([1.0, 1.0, w * w])
-            for j, x in enumerate(nodes):
-                z = np.append(sol.values, -node_weights(s.delays, float(x), s.delay_order))  # type: ignore[arg-type]
-                costs[j] += float(scale @ ((s.r @ z) ** 2).sum(axis=1))
-        return parabola_vertex(nodes, costs)
-
-    d0 = parabola_vertex(nodes, plain_costs)
-    d1 = g(d0)
-    h0 = d1 - d0
-    for _ in range(DELAY_STEPS):
-        if abs(h0) < DELAY_TOL:
-            break
-        g1 = g(d1)
-        h1 = g1 - d1
-        # secant on h(d) = g(d) − d; a plain step where the secant is flat or points away
-        slope = (h1 - h0) / (d1 - d0) if d1 != d0 else 0.0
-        d_next = d1 - h1 / slope if slope < -1e-3 else g1
-        d0, h0, d1 = d1, h1, float(np.clip(d_next, nodes[0], nodes[-1]))
-    return d1
-
-
 def hold_delay(control_period: float) -> float:
     """The lag [s] of the motion behind a torque logged at the start of the ``control_period``
     over which the drives hold it (zero-order hold): half the period. Measured on noise-free
     200 Hz runs simulated under a 1 ms hold: the largest error over the 29 parameters of the
     off-square ropod falls from 2.8 % to 0.57 % (0.37 % with a row every sample)."""
     return 0.5 * control_period
-
-
-def parabola_vertex(x: np.ndarray, y: np.ndarray, width: int = NODE_FIT) -> float:
-    """The minimum of the quadratic fitted to the ``width`` points of (``x``, ``y``) nearest
-    the smallest ``y``, held within those points (at a node when too few or not convex).
-    The delay search fits the costs at the node delays only: between nodes the interpolated
-    torques average the current noise, which would pull the minimum to mid-sample delays."""
-    i = int(np.argmin(y))
-    lo = int(np.clip(i - width // 2, 0, max(len(x) - width, 0)))
-    xs, ys = x[lo: lo + width], y[lo: lo + width]
-    if len(xs) < 3:
-        return float(x[i])
-    c2, c1, _ = np.polyfit(xs - x[i], ys, 2)
-    if c2 <= 0:
-        return float(x[i])
-    return float(np.clip(x[i] - c1 / (2 * c2), xs[0], xs[-1]))
 
 
 def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
@@ -776,7 +608,9 @@ def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     delay = 0.0
     detected: tuple[int, ...] = ()
     if options.input_delay == "auto":
-        reduced, delay, detected = _delay_search(reduce, names, options)
+        from ropod_sysid.delay import delay_search
+
+        reduced, delay, detected = delay_search(reduce, names, options)
     else:
         # a torque held by the drives over a control period acts, on average, half a period
         # after the instant it is logged at (zero-order hold)

@@ -689,7 +689,7 @@ def counts_note(source: str, detected: int | None, given: int | None,
     ``constrained``: a platform whose constraint forces the fit projects out (steered wheels,
     legs), where the correction was measured to over-correct on three of four simulated
     platforms (README). (What ``--input-delay auto`` did with the counts is the search's own
-    note: :func:`ropod_sysid.fit.search_counts_note`.)"""
+    note: :func:`ropod_sysid.delay.search_counts_note`.)"""
     if detected is None or detected == given:
         return None
     if given is None:

@@ -26,7 +26,7 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
    counts (:func:`ropod_sysid.noise.detect_encoder_counts`), also the error gram of those
    counts (:func:`ropod_sysid.noise.fit_error_gram`, on the search's sparser rows:
    :func:`ropod_sysid.noise.search_gram_stride`), for the search's criterion alone
-   (:func:`ropod_sysid.fit._delay_search`).
+   (:func:`ropod_sysid.delay.delay_search`).
 
 Every sample's value is computed from the same neighbours by the same formula as in one pass,
 so the triangles equal the in-memory ones to rounding (the FFT convolution of long windows is
@@ -154,7 +154,7 @@ class _Blocks:
         self.platform = platform
         self.encoder_counts = encoder_counts
         # --input-delay auto without encoder_counts: the counts detected on the first chunk
-        # (_Run.push), whose gram corrects the search's criterion alone (fit._delay_search)
+        # (_Run.push), whose gram corrects the search's criterion alone (delay.delay_search)
         self.search_counts: int | None = None
         self.model = PlatformModel(platform)
         self.k_t = platform.torque_constants()

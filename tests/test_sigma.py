@@ -168,7 +168,7 @@ def test_input_delay_auto_on_noisy_logs_with_the_encoder_correction(off_square,
                                                                    runs_off_square_noisy):
     """With 2¹⁴-count encoders and 30 mA the encoders' errors in A bias the delay search (an
     uncorrected criterion finds +1.34 ms, and 6.34 ms for a 5 ms shift); with
-    ``encoder_counts`` the cost is that of the corrected fit (fit.corrected_delay): +0.51 ms
+    ``encoder_counts`` the cost is that of the corrected fit (delay.corrected_delay): +0.51 ms
     (the simulator's hold is 0.5 ms; the exact logs' search finds +0.37 ms) and 5.51 ms
     (benchmarks/bias.py --part delay, at 200 Hz)."""
     logs = list(runs_off_square_noisy)
@@ -188,21 +188,21 @@ def test_where_the_corrected_cost_is_fragile_the_delay_is_a_fixed_point(monkeypa
     of g: the corrected values fitted at it are best matched there. It lies within 1 ms of the
     hold's 0.5 ms, follows a 5 ms shift of the currents, and is a fixed point to the
     secant's tolerance (a few plain steps from the plain search's +1.34 ms would not be)."""
-    import ropod_sysid.fit as fit_module
+    import ropod_sysid.delay as delay_module
 
-    monkeypatch.setattr(fit_module, "FRAGILE_SHARE", 2.0)  # every ρ² counts as fragile
+    monkeypatch.setattr(delay_module, "FRAGILE_SHARE", 2.0)  # every ρ² counts as fragile
     seen: list[float] = []
-    g_of = fit_module.parabola_vertex
+    g_of = delay_module.parabola_vertex
 
-    def vertex(x: np.ndarray, y: np.ndarray, width: int = fit_module.NODE_FIT) -> float:
+    def vertex(x: np.ndarray, y: np.ndarray, width: int = delay_module.NODE_FIT) -> float:
         seen.append(g_of(x, y, width))
         return seen[-1]
 
-    monkeypatch.setattr(fit_module, "parabola_vertex", vertex)
+    monkeypatch.setattr(delay_module, "parabola_vertex", vertex)
     logs = list(runs_off_square_noisy)
     opts = FitOptions(input_delay="auto", encoder_counts=2**14)
     none = fit_logs(logs, off_square, opts).input_delay
-    assert abs(none - seen[-1]) < 2 * fit_module.DELAY_TOL  # g(d) = d at the end
+    assert abs(none - seen[-1]) < 2 * delay_module.DELAY_TOL  # g(d) = d at the end
     assert none == pytest.approx(5e-4, abs=5e-4)
     found = fit_logs([shifted_currents(lg, 0.005) for lg in logs], off_square,
                      opts).input_delay
