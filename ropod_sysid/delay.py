@@ -149,10 +149,10 @@ def corrected_delay(systems: Sequence[Triangles], nodes: np.ndarray, names: Sequ
                            calibrate=False)
 
     rho2 = np.array([solved(systems, float(d))[0].sigma2 for d in nodes])
-    plain_costs = np.array([solved(plain, float(d))[0].sigma2 for d in nodes])
     k = int(np.argmin(rho2))
-    if rho2[k] >= FRAGILE_SHARE * plain_costs[k]:
+    if rho2[k] >= FRAGILE_SHARE * solved(plain, float(nodes[k]))[0].sigma2:
         return parabola_vertex(nodes, rho2)
+    plain_costs = np.array([solved(plain, float(d))[0].sigma2 for d in nodes])
 
     def g(d: float) -> float:
         sol, weights = solved(systems, d)
