@@ -667,6 +667,24 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: in
                      idle=idle, per_row=per_row(d_rows))  # (zero rows, at rest, carry no equation)
 
 
+def add_error_gram(block: Triangles, model: PlatformModel, pre: Preprocessed,
+                   index: np.ndarray, friction: Friction, first_row: int,
+                   encoder_counts: int | None, search_counts: int | None) -> None:
+    """Give a block's triangles (the rows at sample ``index`` of ``pre``, the first the log's
+    row ``first_row``) the encoders' error gram: of ``encoder_counts`` (``--encoder-counts``)
+    on the fit's rows, else of ``search_counts`` (counts detected in the log, for the delay
+    search's criterion alone) on the search's sparser rows
+    (:func:`ropod_sysid.noise.search_gram_stride`); none without either."""
+    counts = encoder_counts or search_counts
+    if not counts:
+        return
+    from ropod_sysid.noise import fit_error_gram, search_gram_stride
+
+    stride = None if encoder_counts else search_gram_stride(pre.grid.span)
+    block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row, stride)
+    block.error_counts = counts
+
+
 def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per-wheel",
               chunk: int = 20000, encoder_counts: int | None = None,
               search_counts: int | None = None) -> Triangles:
@@ -677,16 +695,10 @@ def triangles(model: PlatformModel, pre: Preprocessed, friction: Friction = "per
     the search's sparser rows (:func:`ropod_sysid.noise.search_gram_stride`)."""
     tri: Triangles | None = None
     per = pre.grid.stretch_rows(pre.dt)
-    counts = encoder_counts or search_counts
     for idx, a, b in system(model, pre, friction, chunk):
         row0 = (int(idx[0]) - pre.trim) // pre.grid.step
         block = block_triangles(a, b, pre.source, row0, per)
-        if counts:
-            from ropod_sysid.noise import fit_error_gram, search_gram_stride
-
-            stride = None if encoder_counts else search_gram_stride(pre.grid.span)
-            block.error_gram = fit_error_gram(model, pre, idx, counts, friction, row0, stride)
-            block.error_counts = counts
+        add_error_gram(block, model, pre, idx, friction, row0, encoder_counts, search_counts)
         tri = block if tri is None else tri.merge(block)
     if tri is None:
         raise InputError(f"{pre.source}: no samples left after trimming the smoother's ends")

@@ -81,6 +81,7 @@ from ropod_sysid.regressor import (
     RowGrid,
     Span,
     TooShort,
+    add_error_gram,
     block_triangles,
     check_input_delay,
     check_length,
@@ -322,15 +323,8 @@ class _Blocks:
                                   pre.angles[rows], pre.angle_rates[rows], pre.tau[rows])
         row0 = (pa + first - self.trim) // self.grid.step  # the log's row number of the first
         block = block_triangles(a, b, self.source, row0, self.grid.stretch_rows(self.dt))
-        counts = self.encoder_counts or self.search_counts
-        if counts:  # (as regressor.triangles)
-            from ropod_sysid.noise import fit_error_gram, search_gram_stride
-
-            rows = first + self.grid.step * np.arange(count)
-            stride = None if self.encoder_counts else search_gram_stride(self.grid.span)
-            block.error_gram = fit_error_gram(self.model, pre, rows, counts, self.friction,
-                                              row0, stride)
-            block.error_counts = counts
+        add_error_gram(block, self.model, pre, first + self.grid.step * np.arange(count),
+                       self.friction, row0, self.encoder_counts, self.search_counts)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
