@@ -1,8 +1,8 @@
 #!/usr/bin/env python
 """Benchmark of long logs and fleets (issue 7): streaming fit, memory, O(N) LOESS, Dask.
 
-    python benchmarks/run.py [--minutes 30] [--quick] [--fresh] [--only report|mcap|simulate]
-        [--mcap-minutes 3]
+    python benchmarks/run.py [--minutes 30] [--quick] [--fresh]
+        [--only report|mcap|simulate|optimize] [--mcap-minutes 3]
 
 1. Simulates a 60 s rest-to-rest ropod run at 1 kHz with ``ropod-sysid simulate`` (2¹⁴-count
    encoders, 30 mA current noise). The long logs are built by repeating that run (simulating
@@ -35,7 +35,10 @@
 4. The simulator (issue 13), also alone with ``--only simulate``: the compiled loop against
    the numpy path, compile and cache-load times, the CLI on a short run
    (``benchmarks/simulate_bench.py``).
-5. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
+5. ``trajectory optimize`` (issue 13), also alone with ``--only optimize``: at its defaults on
+   the shipped platform (goal ≤ 20 s), its candidates split over two processes against one
+   (``--processes``), and that both write the same run.
+6. Prints one table and writes it with the raw figures to ``benchmarks/out/results.{md,json}``
    (``--only report``: ``report.{md,json}``; ``--only mcap``: only the MCAP part, to
    ``results_mcap.{md,json}``).
 
@@ -536,6 +539,33 @@ def report_figures(logs: list[Path], platform_path: Path, long_logs: list[tuple[
     return res, rows
 
 
+def optimize_figures(repeats: int) -> tuple[dict[str, Any], list[tuple[str, str, str, str]]]:
+    """Issue 13: ``trajectory optimize`` at its defaults on the shipped ropod platform, with
+    the candidates split over two processes (the default on two CPUs) against one (the
+    baseline, same run), alternating; the fastest of ``repeats`` counts; the runs written
+    must be byte for byte the same."""
+    out = OUT / "optimize"
+    cmd = [*ropod_sysid(), "trajectory", "optimize", "--platform",
+           str(SAMPLE / "platform.yaml"), "--quiet"]
+    runs: dict[int, list[dict[str, Any]]] = {1: [], 2: []}
+    for _ in range(repeats):
+        for n in (1, 2):
+            shutil.rmtree(out / str(n), ignore_errors=True)
+            runs[n].append(run_measured([*cmd, "--out", str(out / str(n)), "--processes",
+                                         str(n)]))
+    same = all((out / "1" / f).read_bytes() == (out / "2" / f).read_bytes()
+               for f in ("original.csv", "mirrored.csv", "negated.csv", "mirrored_negated.csv"))
+    res = {n: best(r) for n, r in runs.items()}
+    say("optimize: " + ", ".join(f"{n} process(es) "
+                                 + "/".join(f"{x:.1f}" for x in res[n]["runs_s"]) + " s"
+                                 for n in res) + f"; the same run: {same}")
+    rows = [("trajectory optimize, defaults (30 s ropod run)",
+             f"{res[2]['wall_s']:.1f} s (1 process: {res[1]['wall_s']:.1f} s)",
+             f"{res[1]['wall_s'] / res[2]['wall_s']:.2f}× speed-up, same run: {same}",
+             "≤ 20 s")]
+    return {"processes_1": res[1], "processes_2": res[2], "same_run": same}, rows
+
+
 def table_text(rows: list[tuple]) -> str:
     head = ("figure", "measured", "ratio / time", "goal")
     widths = [max(len(str(r[i])) for r in [head, *rows]) for i in range(4)]
@@ -563,9 +593,11 @@ def main() -> None:
                     help="length of the main log [min]; memory is also shown at 1/3 and 2x")
     ap.add_argument("--quick", action="store_true", help="small sizes, to debug the script")
     ap.add_argument("--fresh", action="store_true", help="simulate again even if cached")
-    ap.add_argument("--only", choices=("all", "report", "mcap", "simulate"), default="all",
+    ap.add_argument("--only", choices=("all", "report", "mcap", "simulate", "optimize"),
+                    default="all",
                     help="report: only the report's figures; mcap: only the MCAP figures; "
-                    "simulate: only the simulator's (a few minutes each)")
+                    "simulate: only the simulator's; optimize: only trajectory optimize's "
+                    "(a few minutes each)")
     ap.add_argument("--mcap-minutes", type=float, default=3.0,
                     help="length of the MCAP log [min]; memory is also shown at 2x")
     args = ap.parse_args()
@@ -577,6 +609,13 @@ def main() -> None:
     started = time.perf_counter()
     say(f"machine: {os.cpu_count()} cores, Python {_platform.python_version()}, "
         f"load average {load()}")
+    if args.only == "optimize":
+        OUT.mkdir(parents=True, exist_ok=True)
+        opt, opt_rows = optimize_figures(REPEATS)
+        write_table(opt_rows, f"Machine: {os.cpu_count()} cores, load average {load()} after "
+                    f"(shared); the fastest of {REPEATS} runs counts.", opt, "optimize",
+                    started)
+        return
     if args.only == "simulate":
         OUT.mkdir(parents=True, exist_ok=True)
         sim, sim_rows = simulate_figures(ropod_sysid(), OUT, args.quick)
@@ -733,6 +772,8 @@ def main() -> None:
     rows += mcap_rows(results["mcap"])
     results["simulate"], sim_rows = simulate_figures(ropod_sysid(), OUT, args.quick)
     rows += sim_rows
+    results["optimize"], opt_rows = optimize_figures(REPEATS)
+    rows += opt_rows
     results["load_after"] = load()
     note = (f"Logs: a {base_s:g} s simulated 1 kHz run repeated with t, φ continued across the "
             f"seams (δ by whole turns; no pose columns). Machine: {os.cpu_count()} cores, load "

@@ -21,6 +21,7 @@ from ropod_sysid.cli.common import (
     writes,
 )
 from ropod_sysid.errors import InputError
+from ropod_sysid.forked import PROCESSES_ENV
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.trajectory import MAX_HARMONICS, OPTIMIZE_DURATION, TYPICAL_MAX_DURATION
 from ropod_sysid.trajectory.excitation import OBJECTIVES
@@ -283,6 +284,9 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
 @click.option("--seed", default=0, show_default=True, type=SEED, help="Random seed.")
 @click.option("--maxiter", default=25, show_default=True, type=POSITIVE_INT,
               help="Generations of the search (differential evolution).")
+@click.option("--processes", default=None, type=POSITIVE_INT,
+              help="Processes that evaluate the candidates; the run found does not depend "
+                   f"on it [default: 2 on two CPUs or more, else 1; or ${PROCESSES_ENV}].")
 @output_options
 @quiet_option
 @reports_errors
@@ -294,8 +298,8 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                      floor: tuple[float, ...], platform_path: str, duration: float,
                      harmonics: int, objective: str, target: str, current_noise: float | None,
                      encoder_counts: int | None, exact_encoders: bool, log_rate: float,
-                     params_path: str | None, seed: int, maxiter: int, dt: float,
-                     out: str, quiet: bool) -> None:
+                     params_path: str | None, seed: int, maxiter: int,
+                     processes: int | None, dt: float, out: str, quiet: bool) -> None:
     """Search a run that determines the --target parameters best (or whose stacked regressor
     is best conditioned); write it and its variants."""
     from ropod_sysid.trajectory import optimize
@@ -309,7 +313,7 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                                 else [t.strip() for t in target.split(",") if t.strip()])
     result = optimize(platform, duration, harmonics, objective, seed, maxiter, limits,
                       _floor(floor), progress=not quiet, dt=dt, target=targets,
-                      sensors=sensors, params=params)
+                      sensors=sensors, params=params, processes=processes)
     written = _write_variants(result.trajectory, out)
     if not quiet:
         click.echo(f"optimised run: {result.trajectory.duration:g} s, condition number "

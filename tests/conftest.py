@@ -16,10 +16,12 @@ sys.dont_write_bytecode = False
 
 if os.environ.get("PYTEST_XDIST_WORKER"):  # every CPU has a test worker already: one BLAS
     # thread each, set before numpy loads (two spinning pools per core made the leg fits three
-    # times slower), and reports draw in-process (Painter(2) is tested)
+    # times slower), and reports draw and optimize evaluates in-process (Painter(2) and
+    # ForkedMap(…, 2) are tested)
     for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(_var, "1")
     os.environ.setdefault("ROPOD_SYSID_DRAWERS", "1")
+    os.environ.setdefault("ROPOD_SYSID_PROCESSES", "1")
 
 import numpy as np
 import pytest

@@ -107,7 +107,7 @@ def test_the_predicted_encoder_bias_is_the_fits_error(off_square, truth, planned
 
 def test_optimize_for_sigma_beats_the_typical_run(off_square):
     typ = check(typical(8.0, platform=off_square), off_square, sensors=SensorNoise())
-    opt = optimize(off_square, duration=8.0, harmonics=3, maxiter=2, seed=0)
+    opt = optimize(off_square, duration=8.0, harmonics=3, maxiter=2, seed=0, processes=2)
     assert opt.objective == "sigma" and set(opt.targets) == {"m_b", "Jzz_b", "m_wh", "Jzz_wh",
                                                             "Jrot_w"}
     rep = check(opt.trajectory, off_square, sensors=SensorNoise())

@@ -257,8 +257,11 @@ def test_optimize_beats_typical_off_the_square(off_square, off_pair):
 
 def test_optimize_is_repeatable_and_checks_its_input(ropod):
     a = optimize(ropod, duration=10.0, harmonics=3, maxiter=2, seed=4, objective="cond")
-    b = optimize(ropod, duration=10.0, harmonics=3, maxiter=2, seed=4, objective="cond")
+    # the candidates split over two processes: the same search, value for value
+    b = optimize(ropod, duration=10.0, harmonics=3, maxiter=2, seed=4, objective="cond",
+                 processes=2)
     np.testing.assert_array_equal(a.trajectory.vx, b.trajectory.vx)
+    assert (a.value, a.evaluations) == (b.value, b.evaluations)
     assert a.coefficients.shape == (3, 7)
     with pytest.raises(InputError, match="objective"):
         optimize(ropod, objective="trace")

@@ -39,18 +39,11 @@ DRAWERS_ENV = "ROPOD_SYSID_DRAWERS"  # the number of drawing processes, if set (
 
 
 def default_workers() -> int:
-    """Processes that draw the figures: the environment's :data:`DRAWERS_ENV` when set (a
-    whole number ≥ 1; e.g. 1 where other processes already use every CPU, as parallel test
-    workers do), else 2 where this process may run on two CPUs or more and can fork, else 1
-    (this process)."""
-    given = os.environ.get(DRAWERS_ENV, "").strip()
-    if given.isdigit() and int(given) >= 1:
-        return int(given) if "fork" in multiprocessing.get_all_start_methods() else 1
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cpus = os.cpu_count() or 1
-    return 2 if cpus > 1 and "fork" in multiprocessing.get_all_start_methods() else 1
+    """Processes that draw the figures: :func:`ropod_sysid.forked.default_processes` with the
+    environment's :data:`DRAWERS_ENV` (1: this process)."""
+    from ropod_sysid.forked import default_processes
+
+    return default_processes(DRAWERS_ENV)
 
 
 def _figure(name: str, args: tuple[Any, ...]) -> bytes:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ropod_sysid.errors import InputError
+from ropod_sysid.forked import ForkedMap, default_processes
 from ropod_sysid.model.assembly import SINGULAR_MARGIN
 from ropod_sysid.noise import SensorNoise
 from ropod_sysid.platform import Platform
@@ -39,7 +40,7 @@ from ropod_sysid.trajectory.limits import (
     PlanningError,
     _check_floor,
 )
-from ropod_sysid.trajectory.precheck import stacked_regressor
+from ropod_sysid.trajectory.precheck import CheckReport, stacked_regressor
 from ropod_sysid.trajectory.prediction import _variant_prediction, predict_angles
 from ropod_sysid.trajectory.run_variants import VARIANT_SIGNS, VARIANTS, _off_floor, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
@@ -51,6 +52,7 @@ SINGULAR_WEIGHT = 1.0  # optimize(): weight of the fraction of samples near sing
 MAX_LAG = 0.35  # optimize(): sin of the largest quasi-steady lag of a unit behind its pivot
 SIGMA_RERANK = 6  # optimize("sigma"): candidates within the limits weighed by check at the end
 CURVATURE_MARGIN = 0.95  # optimize(): the least curvature radius is planned at R_min / this
+BATCH = 64  # optimize(): most candidates evaluated at once (memory)
 OBJECTIVES = ("sigma", "cond", "logdet")  # optimize(): what it minimises (the first: default)
 
 
@@ -93,7 +95,8 @@ class _Objective:
 
     def __init__(self, platform: Platform, duration: float, harmonics: int, limits: Limits,
                  floor: Floor, objective: str, friction: str, grid_rate: float,
-                 eval_rate: float, sigma: SigmaTarget | None = None) -> None:
+                 eval_rate: float, sigma: SigmaTarget | None = None,
+                 processes: int | None = None) -> None:
         from ropod_sysid.model import PlatformModel
 
         self.platform = platform
@@ -120,6 +123,8 @@ class _Objective:
                               if sigma is not None else 1.0)
         self.variances: np.ndarray | None = None  # mean row variances (D,), from the 1st batch
         self.columns: np.ndarray | None = None  # the fit's base columns (rank deficiency)
+        self.processes = default_processes() if processes is None else processes
+        self.split: ForkedMap | None = None
 
     def twist(self, coef: np.ndarray, margin: float = 0.95,
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -140,13 +145,29 @@ class _Objective:
         return np.stack(out, axis=-1)
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        """Objective values (S,) for coefficients x (D, S) (scipy's vectorised layout)."""
+        """Objective values (S,) for coefficients x (D, S) (scipy's vectorised layout); after
+        the first call (which fixes what the later ones share: the rank, the rows' variances)
+        split over :attr:`processes` forked processes."""
         coef = np.atleast_2d(np.asarray(x, float).T)
-        out = np.empty(coef.shape[0])
-        for k in range(0, coef.shape[0], 64):
-            out[k:k + 64] = self._batch(coef[k:k + 64])
+        if self.evaluations and self.processes > 1 and self.split is None:
+            self.split = ForkedMap(self.values, self.processes)
+        out = (self.split or self.values)(coef)
         self.evaluations += coef.shape[0]
         return out
+
+    def values(self, coef: np.ndarray) -> np.ndarray:
+        """Objective values (S,) for coefficients (S, D), in batches of at most
+        :data:`BATCH` (a candidate's value does not depend on its batch)."""
+        out = np.empty(coef.shape[0])
+        for idx in np.array_split(np.arange(coef.shape[0]), -(-coef.shape[0] // BATCH)):
+            out[idx] = self._batch(coef[idx])
+        return out
+
+    def close(self) -> None:
+        """End the forked processes of :meth:`__call__`."""
+        if self.split is not None:
+            self.split.close()
+            self.split = None
 
     def _batch(self, coef: np.ndarray) -> np.ndarray:
         tw, twd, _ = self.twist(coef)
@@ -318,7 +339,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
              limits: Limits | None = None, floor: Sequence[float] = DEFAULT_FLOOR,
              progress: bool = False, dt: float = 0.005, popsize: int = 4,
              friction: str = "per-wheel", target: str | Sequence[str] = "inertial",
-             sensors: SensorNoise | None = None, params: object = None) -> OptimizeResult:
+             sensors: SensorNoise | None = None, params: object = None,
+             processes: int | None = None) -> OptimizeResult:
     """An optimal excitation run: finite Fourier series per base DOF (Swevers et al.).
 
     The run is a member of :class:`FourierFamily` (speed, direction of travel and curvature of
@@ -370,6 +392,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     maxiter : generations of the search; popsize : population = popsize × 3(2H+1) candidates
     limits, floor : as for :func:`typical`; progress : progress bar on stderr (terminal only)
     dt : sample interval of the returned setpoints [s]; friction : friction model of A_ID,ext
+    processes : processes that evaluate the candidates (default
+        :func:`~ropod_sysid.forked.default_processes`); the result does not depend on it
 
     Returns
     -------
@@ -402,7 +426,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     sigma = (sigma_target(platform, target, friction, sensors or SensorNoise(), params)
              if objective == "sigma" else None)
     obj = _Objective(platform, float(duration), harmonics, limits, floor, objective, friction,
-                     grid_rate=10.0, eval_rate=2.0, sigma=sigma)
+                     grid_rate=10.0, eval_rate=2.0, sigma=sigma, processes=processes)
     bounds = [(-1.0, 1.0)] * obj.n_base + [(0.0, 1.0)] * obj.n_plan
     generations = 0
     with Progress(maxiter, "optimize", quiet=not progress) as bar:
@@ -411,33 +435,54 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
             generations += 1
             bar.update(1)
 
-        res = scipy.optimize.differential_evolution(
-            obj, bounds, seed=seed, maxiter=maxiter, popsize=popsize, tol=0.0,
-            polish=False, vectorized=True, updating="deferred", init="latinhypercube",
-            callback=callback)
+        try:
+            res = scipy.optimize.differential_evolution(
+                obj, bounds, seed=seed, maxiter=maxiter, popsize=popsize, tol=0.0,
+                polish=False, vectorized=True, updating="deferred", init="latinhypercube",
+                callback=callback)
+        finally:
+            obj.close()
     fine_t = np.linspace(0.0, duration, int(round(duration / dt)) + 1)
     fam = _family(platform, duration, harmonics, fine_t, limits)
+
+    def weigh(idx: np.ndarray) -> np.ndarray:
+        """Candidates ``idx`` of the population on the fine grid: each one's (trajectory,
+        s_v, the limit it breaks or "", its check report for ``sigma`` or None)."""
+        out = np.empty(len(idx), dtype=object)
+        for j, k in enumerate(idx):
+            coef = res.population[k]
+            _, _, s_v = obj.twist(coef[None])
+            tw, _, _ = _scaled_twist(fam, coef[None, :obj.n_base], limits, floor, fine_t,
+                                     0.95, s_v)
+            legs = obj.planned(fine_t, tw, coef[None])
+            traj = Trajectory.from_twist(fine_t, tw[0, :, 0], tw[0, :, 1], tw[0, :, 2],
+                                         None if legs is None else dict(zip(
+                                             model.planned_columns, legs[0].T, strict=True)))
+            ok, why = _verify(traj, platform, limits, floor)
+            rep = (_check(traj, platform, limits, floor, friction, sigma)
+                   if ok and sigma is not None else None)
+            out[j] = (traj, float(s_v[0]), why, rep)
+        return out
+
     notes: list[str] = []
     why_first = ""
-    good: list[tuple[np.ndarray, Trajectory, float, float]] = []
+    good: list[tuple[np.ndarray, Trajectory, float, float, CheckReport | None]] = []
     broke = 0
-    for k in np.argsort(res.population_energies)[:12]:
-        coef = res.population[k]
-        _, _, s_v = obj.twist(coef[None])
-        tw, _, _ = _scaled_twist(fam, coef[None, :obj.n_base], limits, floor, fine_t, 0.95,
-                                 s_v)
-        legs = obj.planned(fine_t, tw, coef[None])
-        traj = Trajectory.from_twist(fine_t, tw[0, :, 0], tw[0, :, 1], tw[0, :, 2],
-                                     None if legs is None else dict(zip(
-                                         model.planned_columns, legs[0].T, strict=True)))
-        ok, why = _verify(traj, platform, limits, floor)
-        if ok:
-            good.append((coef, traj, float(s_v[0]), float(res.population_energies[k])))
-            if sigma is None or len(good) == SIGMA_RERANK:
-                break
-        else:
-            broke += 0 if good else 1
-            why_first = why_first or why
+    # the best candidates in order until enough hold every limit on the fine grid (with
+    # "sigma", SIGMA_RERANK of them, weighed by check: a second each, split over processes)
+    ranked, taken = np.argsort(res.population_energies)[:12], 0
+    need = SIGMA_RERANK if sigma is not None else 1
+    with ForkedMap(weigh, processes if sigma is not None else 1) as split:
+        while len(good) < need and taken < len(ranked):
+            batch = ranked[taken:taken + need - len(good)]
+            taken += len(batch)
+            for k, (traj, s_v, why, rep) in zip(batch, split(batch), strict=True):
+                if why:
+                    broke += 0 if good else 1
+                    why_first = why_first or why
+                else:
+                    good.append((res.population[k], traj, s_v,
+                                 float(res.population_energies[k]), rep))
     if not good:
         raise PlanningError(f"no optimised run within the limits ({why_first}); try another "
                             "seed, more maxiter or a longer duration")
@@ -446,14 +491,13 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
                      f"({why_first}); took the next")
     chosen = good[0]
     if sigma is not None and len(good) > 1:
-        scores = [_total_error(g[1], platform, limits, floor, friction, sigma) for g in good]
-        best = int(np.argmin(scores))
+        best = int(np.argmin([_total_error(g[4], sigma) for g in good]))
         if best:
             notes.append(f"of the {len(good)} best candidates within the limits, number "
                          f"{best + 1} has the least predicted error once the encoders' bias "
                          "is counted (trajectory check)")
         chosen = good[best]
-    coef, traj, s_v, value = chosen
+    coef, traj, s_v, value, rep = chosen
     if obj.planners:
         k, plans = obj.n_base, []
         for unit, d in obj.planners:
@@ -467,11 +511,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
                          obj.rank or 0, coef[:obj.n_base].reshape(3, -1), s_v,
                          obj.evaluations, generations, time.monotonic() - t_start, notes,
                          plan=coef[obj.n_base:].copy())
-    if sigma is not None:
-        from ropod_sysid.trajectory.precheck import check
-
-        rep = check(traj, platform, limits, floor, params=sigma.truth_params,  # type: ignore[arg-type]
-                    friction=friction, sensors=sigma.sensors)
+    if rep is not None:
+        assert sigma is not None
         out.targets = {n: float(rep.relative_std[rep.names.index(n)]) for n in sigma.names}
         out.target_bias = {n: float(rep.bias[j] / abs(rep.true_values[j]))
                            if rep.true_values[j] else math.nan
@@ -480,14 +521,19 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
     return out
 
 
-def _total_error(traj: Trajectory, platform: Platform, limits: Limits, floor: Floor,
-                 friction: str, sigma: SigmaTarget) -> float:
-    """Mean log of the targets' predicted √(σ² + bias²) relative to their values, by
-    :func:`~ropod_sysid.trajectory.precheck.check` on the run's own grid."""
+def _check(traj: Trajectory, platform: Platform, limits: Limits, floor: Floor, friction: str,
+           sigma: SigmaTarget) -> CheckReport:
+    """:func:`~ropod_sysid.trajectory.precheck.check` of a run under ``sigma``'s sensor model
+    and true values, on the run's own grid."""
     from ropod_sysid.trajectory.precheck import check
 
-    rep = check(traj, platform, limits, floor, params=sigma.truth_params,  # type: ignore[arg-type]
-                friction=friction, sensors=sigma.sensors)
+    return check(traj, platform, limits, floor, params=sigma.truth_params,  # type: ignore[arg-type]
+                 friction=friction, sensors=sigma.sensors)
+
+
+def _total_error(rep: CheckReport, sigma: SigmaTarget) -> float:
+    """Mean log of the targets' predicted √(σ² + bias²) relative to their values, from a
+    run's :func:`_check` report."""
     idx = [rep.names.index(n) for n in sigma.names]
     total = np.hypot(rep.std[idx], np.nan_to_num(rep.bias[idx]))
     ok = np.isfinite(total)
