@@ -1,8 +1,10 @@
 """Splitting a vectorised evaluation over forked copies of this process.
 
-Work that is a pure function of the rows of an array (a population of candidates, one value
-each) splits over processes without changing a single value: each process evaluates its
-share of the rows exactly as this one would. :class:`ForkedMap` forks the helper processes
+Work that is a function of the rows of an array (a population of candidates, one value
+each) splits over processes without changing a single value when each process evaluates its
+share exactly as this one would: where the work is batched and a value can differ in its last
+digits with its batch's other rows (vectorised sums), each share must be whole batches (the
+``pieces`` of :meth:`ForkedMap.__call__`). :class:`ForkedMap` forks the helper processes
 once, when it is made, so they start with everything this process has built (models,
 caches, compiled code) and receive only the rows; this process evaluates the first share
 itself. Each process keeps one BLAS thread: two processes with threaded BLAS on two CPUs
@@ -15,7 +17,7 @@ import contextlib
 import multiprocessing
 import os
 import signal
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -42,6 +44,20 @@ def default_processes(env: str = PROCESSES_ENV) -> int:
     return 2 if cpus > 1 else 1
 
 
+def _cuts(sizes: np.ndarray, shares: int) -> list[int]:
+    """Row indices that cut pieces of lengths ``sizes`` into ``shares`` non-empty shares of
+    whole pieces, each cut at the piece boundary nearest its equal share of the rows."""
+    bounds = np.cumsum(sizes)[:-1]  # the boundaries between pieces
+    cuts: list[int] = []
+    lo = 0  # the first boundary the next cut may take
+    for k in range(1, shares):
+        hi = len(bounds) - (shares - k)  # leave a piece for each share after this one
+        j = lo + int(np.argmin(np.abs(bounds[lo:hi + 1] - k * sizes.sum() / shares)))
+        cuts.append(int(bounds[j]))
+        lo = j + 1
+    return cuts
+
+
 def _serve(func: Callable[[np.ndarray], np.ndarray], conn: Any) -> None:
     """A helper process: ``func`` of each array received, sent back, until None or the end
     of the connection (the parent has gone). Ctrl-C is the parent's to handle."""
@@ -66,11 +82,11 @@ def _serve(func: Callable[[np.ndarray], np.ndarray], conn: Any) -> None:
 
 
 class ForkedMap:
-    """``func`` (rows (S, …) → values (S, …), each row's values depending on that row alone)
-    over ``processes`` processes (default :func:`default_processes`): calling it splits the
-    rows into equal shares (:func:`numpy.array_split`), evaluates the first here and the others
-    in processes forked when this object was made, and joins the values in order. Use it as a
-    context manager (or :meth:`close` it) so that the helpers end."""
+    """``func`` (rows (S, …) → values (S, …)) over ``processes`` processes (default
+    :func:`default_processes`): calling it splits the rows into shares of about equal length,
+    evaluates the first here and the others in processes forked when this object was made, and
+    joins the values in order. Use it as a context manager (or :meth:`close` it) so that the
+    helpers end."""
 
     def __init__(self, func: Callable[[np.ndarray], np.ndarray],
                  processes: int | None = None) -> None:
@@ -100,10 +116,17 @@ class ForkedMap:
     def processes(self) -> int:
         return 1 + len(self._procs)
 
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        if not self._conns or len(x) < 2:
+    def __call__(self, x: np.ndarray, pieces: Sequence[int] | None = None) -> np.ndarray:
+        """``func`` of the rows x, split into shares of about equal length; ``pieces``: the
+        lengths of consecutive runs of rows that no share may cut (default: single rows), e.g.
+        where ``func`` batches the rows and a value may differ in its last digits with its
+        batch's other rows: then each share must be whole batches."""
+        sizes = np.ones(len(x), int) if pieces is None else np.asarray(pieces, int)
+        if sizes.sum() != len(x) or (sizes < 1).any():
+            raise ValueError(f"pieces {sizes.tolist()} do not make up {len(x)} rows")
+        if not self._conns or len(sizes) < 2:
             return self.func(x)
-        parts = np.array_split(x, min(self.processes, len(x)))
+        parts = np.split(x, _cuts(sizes, min(self.processes, len(sizes))))
         for conn, part in zip(self._conns, parts[1:], strict=False):
             conn.send(part)
         values = [self.func(parts[0])]

@@ -25,10 +25,26 @@ def test_a_split_gives_the_values_in_order_from_two_processes():
         again = split(x[:1])  # one row: this process alone
     np.testing.assert_array_equal(out[:, 0], x[:, 0] ** 2)
     pids = out[:, 1].astype(int)
-    assert pids[0] == os.getpid() and len(set(pids)) == 2  # shares of 4 and 3 rows
-    assert list(pids).count(os.getpid()) == 4
+    assert pids[0] == os.getpid() and len(set(pids)) == 2  # shares of 3 and 4 rows
+    assert list(pids).count(os.getpid()) == 3
     assert again[0, 1] == os.getpid()
     assert not [p for p in multiprocessing.active_children() if p.name == "ropod-sysid-helper"]
+
+
+def _batch_sums(x: np.ndarray) -> np.ndarray:
+    """Each row's value with its share's length (the batch it was evaluated in)."""
+    return np.column_stack([x[:, 0], np.full(len(x), len(x))])
+
+
+def test_shares_keep_the_pieces_whole():
+    x = np.arange(10.0)[:, None]
+    with ForkedMap(_batch_sums, 2) as split:
+        out = split(x, [4, 3, 3])  # shares of pieces: [4] and [3, 3]
+        assert list(out[:, 1]) == [4] * 4 + [6] * 6
+        assert list(split(x)[:, 1]) == [5] * 10  # single rows: halves
+        with pytest.raises(ValueError, match=r"pieces \[4, 3\] do not make up 10 rows"):
+            split(x, [4, 3])
+    np.testing.assert_array_equal(out[:, 0], x[:, 0])
 
 
 def test_a_helpers_error_is_raised_here_and_the_helpers_end():

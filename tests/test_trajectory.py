@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from ropod_sysid.cli.main import main
 from ropod_sysid.errors import InputError
 from ropod_sysid.model import PlatformModel
+from ropod_sysid.noise import SensorNoise
 from ropod_sysid.platform import ropod_platform, save_platform
 from ropod_sysid.trajectory import (
     VARIANTS,
@@ -253,6 +254,33 @@ def test_optimize_beats_typical_off_the_square(off_square, off_pair):
         assert_within(vt)
     acc = opt.trajectory.twist_rates()
     assert np.abs(np.diff(acc, axis=0)).max() < 0.03  # continuous acceleration
+
+
+def test_the_objective_is_the_same_in_two_processes(ropod):
+    """Split over two processes, each candidate's value is the same to the last digit as in
+    one process (whole batches per process: a value can differ in its last digits with the
+    other candidates of its batch), for populations that batch unevenly."""
+    from ropod_sysid.trajectory.excitation import (
+        DEFAULT_FLOOR,
+        _check_floor,
+        _Objective,
+        sigma_target,
+    )
+    from ropod_sysid.trajectory.limits import Limits
+
+    sig = sigma_target(ropod, "inertial", "per-wheel", SensorNoise())
+    objs = [_Objective(ropod, 8.0, 5, Limits(), _check_floor(DEFAULT_FLOOR), "sigma",
+                       "per-wheel", 10.0, 2.0, sigma=sig, processes=n) for n in (1, 2)]
+    rng = np.random.default_rng(3)
+    first = rng.uniform(-1.0, 1.0, (objs[0].n_base, 20))
+    for obj in objs:
+        obj(first)  # fixes the rows' variances; the split starts with the next call
+    for n in (150, 131):  # three batches: one process takes one, the other two
+        x = rng.uniform(-1.0, 1.0, (objs[0].n_base, n))
+        one, two = objs[0](x), objs[1](x)
+        assert objs[1].split is not None and objs[1].split.processes == 2
+        np.testing.assert_array_equal(one, two)
+    objs[1].close()
 
 
 def test_optimize_is_repeatable_and_checks_its_input(ropod):

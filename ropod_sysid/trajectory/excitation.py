@@ -90,6 +90,12 @@ class OptimizeResult:
     plan: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
+def _batches(n: int) -> list[np.ndarray]:
+    """The candidates 0…n−1 in the fewest batches of at most :data:`BATCH`, of equal length
+    (± 1, the longer first); whole batches of them, taken in order, are again such batches."""
+    return np.array_split(np.arange(n), -(-n // BATCH))
+
+
 class _Objective:
     """Vectorised objective of :func:`optimize` over a population of coefficient vectors."""
 
@@ -151,15 +157,18 @@ class _Objective:
         coef = np.atleast_2d(np.asarray(x, float).T)
         if self.evaluations and self.processes > 1 and self.split is None:
             self.split = ForkedMap(self.values, self.processes)
-        out = (self.split or self.values)(coef)
+        if self.split is None:
+            out = self.values(coef)
+        else:  # each process whole batches: the same batches as in one process
+            out = self.split(coef, [len(b) for b in _batches(coef.shape[0])])
         self.evaluations += coef.shape[0]
         return out
 
     def values(self, coef: np.ndarray) -> np.ndarray:
-        """Objective values (S,) for coefficients (S, D), in batches of at most
-        :data:`BATCH` (a candidate's value does not depend on its batch)."""
+        """Objective values (S,) for coefficients (S, D), in the batches of
+        :func:`_batches` (a value can differ in its last digits with its batch)."""
         out = np.empty(coef.shape[0])
-        for idx in np.array_split(np.arange(coef.shape[0]), -(-coef.shape[0] // BATCH)):
+        for idx in _batches(coef.shape[0]):
             out[idx] = self._batch(coef[idx])
         return out
 
