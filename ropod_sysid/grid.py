@@ -19,7 +19,7 @@ import numpy as np
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.odometry import unwrap_from
-from ropod_sysid.regressor import GRID_STEPS, grid_step, jitter_note, on_grid
+from ropod_sysid.regressor import GRID_STEPS, grid_jitter, grid_step, jitter_note, on_grid
 
 
 class _OffGrid(Exception):
@@ -58,7 +58,7 @@ class _Samples:
 class _Sink(Protocol):
     """Where the grid samples go (:class:`ropod_sysid.stream._Blocks`)."""
 
-    def start(self, dt: float) -> None: ...
+    def start(self, dt: float, jitter: float = 0.0) -> None: ...
 
     def push(self, samples: _Samples) -> None: ...
 
@@ -115,7 +115,7 @@ class _Grid:
         self.t0 = float(head.t[0])
         if not self.resample and not on_grid(np.diff(head.t), self.dt):
             self.resample = True
-        self.sink.start(self.dt)
+        self.sink.start(self.dt, grid_jitter(head.t, self.dt))
         self._emit(head, final)
 
     def _emit(self, raw: _Samples, final: bool) -> None:

@@ -11,16 +11,17 @@ predicted b_ID = A_ID,ext m; σ̂² follows from the sensors, traced through the
 * **current noise** σ_i [A], white per sample: the torque of actuator a is k_t,a i_a, so b_ID
   of a row carries B_τ diag(k_t² σ_i²) B_τᵀ, through the torque average over the row step and the
   rows' LOESS (kernel g_τ: :func:`row_kernel`);
-* **encoder quantisation**, 2π/counts per count, uniform: σ_φ² = (2π/counts)² / 12 per angle
-  and sample while the angle moves a count per sample or more (a slower angle steps rarely: its
-  error is a sampled sawtooth, :func:`sawtooth_share`). The angles are smoothed (LOESS of k
-  samples) and differenced (odd kernel to φ̇, even to φ̈: uncorrelated), the pose follows by
-  odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from the units' constraint rows
-  C ν = D φ̇), and each channel's rate and acceleration errors reach the rows through the fit's
-  own recipe (:func:`recipe_sensitivities`: odometry's q̇ and q̈ including the steering rates'
-  term, the projection onto the allowed motions, the held joints, the identification projector,
-  the rows at rest), then pass the rows' LOESS with them. A row's error is δA m; its variance
-  Σ_s (W_s m)² over the sources s.
+* **encoder quantisation**, 2π/counts per count, uniform: σ_φ² = (2π/counts)² / 12 per angle and
+  sample while the angle moves a count per sample or more (a slower angle steps rarely: its
+  error is a sampled sawtooth, :func:`sawtooth_share`; in a fit, every angle's error is the
+  sawtooth of its motion through the row's window, :func:`tone_share`). The angles are smoothed
+  (LOESS of k samples) and differenced (odd kernel to φ̇, even to φ̈: uncorrelated), the pose
+  follows by odometry (the base displacement is G Δφ, G = (CᵀC)⁻¹ Cᵀ D from the units'
+  constraint rows C ν = D φ̇), and each channel's rate and acceleration errors reach the rows
+  through the fit's own recipe (:func:`recipe_sensitivities`: odometry's q̇ and q̈ including the
+  steering rates' term, the projection onto the allowed motions, the held joints, the
+  identification projector, the rows at rest), then pass the rows' LOESS with them. A row's
+  error is δA m; its variance Σ_s (W_s m)² over the sources s.
 
 Both are white per sample before the filters, so a row carries σ² ‖g‖² of each, g the whole
 kernel from the samples to the row. σ̂² is the mean over rows and DOFs of the weighted
@@ -32,7 +33,9 @@ E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m. E[δAᵀδ
 :func:`recipe_error_gram`, for both sides: what ``fit --encoder-counts`` subtracts from a log's
 normal equations (:func:`fit_error_gram`) and what ``trajectory check`` and ``optimize`` predict
 for a planned run (:func:`planned_rows`: the same recipe at the planned states; on the same rows
-the two grams are equal). Measured against the quantised − exact rows of steered-swivel and
+the two grams are equal but for each channel's share: the fit's follows the log's motion
+through each row's window, :func:`tone_share`, a planned row's its rate,
+:func:`sawtooth_share`). Measured against the quantised − exact rows of steered-swivel and
 legs-exact, its inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65,
 cause not found); the base rows' variance of δA m on steered-swivel within 0.77–0.84 (the
 steering rows' 0.12–0.24, cause not found). Through the swivel's caster offset the pivots'
@@ -72,6 +75,8 @@ class SensorNoise:
     row_step : samples between equation rows (``--row-step``; None: the fit's default)
     degree : the fit's smoother (``--smoother``): 2 LOESS and three-point differences, 4 the
         local quartic and five-point differences
+    jitter : half-width of a uniform jitter of the sample instants [samples]
+        (:func:`ropod_sysid.regressor.grid_jitter`; for :func:`tone_share`)
     """
 
     current_noise: float = 0.03
@@ -80,6 +85,7 @@ class SensorNoise:
     span: float = DEFAULT_SPAN_S
     row_step: int | None = None
     degree: int = 2
+    jitter: float = 0.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.current_noise) and self.current_noise >= 0):
@@ -190,17 +196,108 @@ def sawtooth_share(kernel: np.ndarray, counts_per_sample: np.ndarray) -> np.ndar
     return np.where(a >= 1.0, 1.0, np.interp(a, c, share))
 
 
-def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int) -> np.ndarray:
+def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int,
+                      window_motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Variance (N, J) of each angle channel's rate (``order`` 1) or acceleration (2) error at
     the rows from quantisation: σ_φ² ‖g‖² of the whole kernel g to a row
     (:func:`velocity_kernel` or :func:`acceleration_kernel` and the rows' LOESS) times the
-    :func:`sawtooth_share` of a channel moving |φ̇| dt / step counts per sample."""
+    :func:`sawtooth_share` of a channel moving |φ̇| dt / step counts per sample; or, with
+    ``window_motion`` (rates [rad/s], accelerations [rad/s²], each (N, J): the channels'
+    motion through the row's window, :func:`window_motion`), the :func:`tone_share` of that
+    motion."""
     kernel = (velocity_kernel if order == 1 else acceleration_kernel)(noise.k, noise.dt,
                                                                      noise.degree)
     full = row_kernel(noise.grid, kernel)
     counts = int(noise.encoder_counts)  # type: ignore[arg-type]
-    cps = np.abs(rates) * noise.dt / (2.0 * math.pi / counts)
-    return encoder_variance(counts) * float(np.sum(full**2)) * sawtooth_share(full, cps)
+    step = 2.0 * math.pi / counts
+    white = encoder_variance(counts) * float(np.sum(full**2))
+    if window_motion is not None:
+        rate, accel = window_motion
+        return white * tone_share(full, rate * noise.dt / step, accel * noise.dt**2 / step,
+                                  noise.jitter)
+    cps = np.abs(rates) * noise.dt / step
+    return white * sawtooth_share(full, cps)
+
+
+TONE_HARMONICS = 64  # the sawtooth's harmonics tone_share follows; the rest counted white
+
+
+def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: float = 0.0,
+               harmonics: int = TONE_HARMONICS, chunk: int = 256) -> np.ndarray:
+    """The variance of a kernel's output for an angle quantised while it moves through the
+    kernel's window as x(s) = c s + ½ a s² counts (``rate`` c [counts/sample] and ``accel``
+    a [counts/sample²], (N, J), at the window's centre s = 0), over the white noise's
+    (step²/12 ‖g‖²), expected over where the encoder's count grid lies (its zero):
+
+        share = 12 [Σ_{k=1}^{K} |Σ_s g_s e^{2πik x(−s)}|² / (2π²k²) + r_K ‖g‖²] / ‖g‖²,
+
+    the sawtooth e = step (round(x) − x) = step Σ_{k≠0} e^{2πik x} (−1)^k / (2πik) through the
+    kernel (y = Σ_s g_s e(−s)), whose harmonics past K (power r_K = 1/12 − Σ_{k≤K} 1/(2π²k²),
+    0.8 % at K = 64) are counted white. At a steady rate the error is a tone at (c mod 1)
+    cycles per sample (and its harmonics): the kernel passes it where k c is near a whole
+    number, not white noise, which a uniform spread of rates would average to; a slow angle
+    (c < 1, a = 0) gives :func:`sawtooth_share`. Sample instants jittered uniformly by ±J
+    samples (``jitter``; the log's times are the true instants, which the fit resamples)
+    shift harmonic k's phase at tap s by k c_s j: its coherent part is scaled by
+    χ = sinc(2 k |c_s| J) and the rest, Σ g_s² (1 − χ²), is white (a jitter of many counts,
+    as the shipped ropod's wheels, ±0.5 ms at 500 counts per sample, makes the error white
+    again). Measured (quantised − exact rows, zeros at 0;
+    ``benchmarks/counts.py``), predicted / empirical of the inertial columns' diagonals and
+    (E m)_j per row kind, white share → this one: steered-four 0.16–2.47 → 0.26–0.98 (x and y
+    rows 0.89–2.47 → 0.85–0.98; the θ rows' J_zz,b 0.16 → 0.26, their J_rot,s 0.49 → 0.54:
+    the θ kind there is not this), the ropod's 60 s typical run at 100 Hz 0.67–1.53 →
+    0.73–1.00, its 20 s one at 1 kHz (zeros at random) 0.86–1.51 → 0.90–1.12, the off-square
+    ropod's 30 s one at 1 kHz 1.34–1.77 → 0.90–1.04, steered-swivel unchanged."""
+    g = np.asarray(kernel, float)
+    half = (g.size - 1) // 2
+    off = (half - np.arange(g.size)).astype(float)  # the sample offset −s of g's taps
+    c = np.asarray(rate, float)
+    a = np.asarray(accel, float)
+    g2 = float(np.sum(g**2))
+    k = np.arange(1, harmonics + 1)
+    rest = 1.0 / 12.0 - float(np.sum(1.0 / (2.0 * np.pi**2 * k**2)))
+    out = np.empty(c.shape)
+    flat_c, flat_a, flat_o = c.reshape(-1), a.reshape(-1), out.reshape(-1)
+    for i in range(0, flat_c.size, chunk):
+        x = flat_c[i:i + chunk, None] * off + 0.5 * flat_a[i:i + chunk, None] * off**2
+        z1 = np.exp(2j * np.pi * (x - np.floor(x)))
+        zk = np.ones_like(z1)
+        tot = np.zeros(z1.shape[0])
+        cps = np.abs(flat_c[i:i + chunk, None] + flat_a[i:i + chunk, None] * off)
+        for kk in k:
+            zk *= z1
+            if jitter > 0:  # χ_k = E e^{2πik c j}: sinc(2 k c J) for j uniform in ±J
+                chi = np.sinc(2.0 * kk * cps * jitter)
+                tot += (np.abs((zk * chi) @ g) ** 2 + (1.0 - chi**2) @ g**2) / (2.0 * np.pi**2
+                                                                               * kk**2)
+            else:
+                tot += np.abs(zk @ g) ** 2 / (2.0 * np.pi**2 * kk**2)
+        flat_o[i:i + chunk] = 12.0 * (tot + rest * g2) / g2
+    return out
+
+
+def window_motion(pre: object, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The angle channels' rates [rad/s] and accelerations [rad/s²] (each (N, J)) through the
+    window of each row at samples ``index`` of ``pre``: a straight line through the smoothed
+    rates of the samples within the rows' halo (:attr:`RowGrid.halo`: those a streamed block
+    holds around its rows, so streamed and whole logs agree), for :func:`tone_share`."""
+    rates = pre.angle_rates  # type: ignore[attr-defined]
+    h = int(pre.grid.halo)  # type: ignore[attr-defined]
+    off = np.arange(-h, h + 1)
+    at = np.clip(np.asarray(index)[:, None] + off, 0, rates.shape[0] - 1)  # (N, L)
+    inside = (np.asarray(index)[:, None] + off >= 0) & (np.asarray(index)[:, None] + off
+                                                         < rates.shape[0])
+    w = inside.astype(float)
+    s = off.astype(float) * pre.dt  # type: ignore[attr-defined]
+    sw, sws, swss = w.sum(1), (w * s).sum(1), (w * s * s).sum(1)
+    r = rates[at]  # (N, L, J)
+    ry = np.einsum("nl,nlj->nj", w, r)
+    rsy = np.einsum("nl,nlj->nj", w * s, r)
+    det = sw * swss - sws**2
+    det = np.where(det > 0, det, np.inf)
+    accel = (sw[:, None] * rsy - sws[:, None] * ry) / det[:, None]
+    rate = (ry - sws[:, None] * accel) / sw[:, None]
+    return rate, accel
 
 
 def velocity_kernel(k: int, dt: float, degree: int = 2) -> np.ndarray:
@@ -389,16 +486,19 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     (:func:`recipe_error_gram`) at every ``stride``-th row of the log (default
     :func:`gram_stride` of the rows' span; ``first_row``: the log's row number of
     ``index[0]``, so that blocks streamed in chunks pick the rows of the whole log), each
-    weighted ``stride``."""
+    weighted ``stride``; each channel's quantisation error as the sawtooth of its motion
+    through the row's window (:func:`tone_share`, :func:`window_motion`)."""
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
-                        row_step=pre.grid.step, degree=pre.degree)  # type: ignore[attr-defined]
+                        row_step=pre.grid.step, degree=pre.degree,  # type: ignore[attr-defined]
+                        jitter=float(getattr(pre, "jitter", 0.0)))
     index = np.asarray(index)
     stride = gram_stride(pre.grid.span) if stride is None else max(1, int(stride))  # type: ignore[attr-defined]
     index = index[(first_row + np.arange(index.size)) % stride == stride // 2]
     if index.size == 0:
         p = len(model.parameter_names(friction))  # type: ignore[attr-defined]
         return np.zeros((3, p, p))
-    gram, _ = recipe_error_gram(model, pre.take(index), noise, friction)  # type: ignore[attr-defined]
+    gram, _ = recipe_error_gram(model, pre.take(index), noise, friction,  # type: ignore[attr-defined]
+                                motion=window_motion(pre, index))
     return kind_grams(gram) * float(stride)
 
 
@@ -505,7 +605,9 @@ def planned_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
 
 def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
                          friction: str = "per-wheel", h: float = 1e-6,
-                         used: list[int] | None = None) -> tuple[np.ndarray, list[int]]:
+                         used: list[int] | None = None,
+                         motion: tuple[np.ndarray, np.ndarray] | None = None,
+                         ) -> tuple[np.ndarray, list[int]]:
     """W (N, 2J, D, p): the first-order change of each row's A_ID,ext per standard deviation
     of each encoder channel's rate error (the first J sources) and acceleration error (the
     last J) at the rows ``rows`` (a :class:`Preprocessed` of the row samples, or
@@ -525,8 +627,10 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
       singular configurations) and the rows at rest zero, as the fit forms them.
 
     Without constraints the projections are the identity. ``used``: the rate channels A or
-    Ġ q̇ reads (None: found on a few rows); returned with W, for the next rows.
-    (Second-order terms — the angles' own errors in A's angle-dependent columns — are left
+    Ġ q̇ reads (None: found on a few rows); returned with W, for the next rows. ``motion``:
+    the channels' motion through the rows' windows (:func:`window_motion`), whose
+    :func:`tone_share` the sources' variances take (None: :func:`sawtooth_share` of the rows'
+    rates). (Second-order terms — the angles' own errors in A's angle-dependent columns — are left
     out.)"""
     from ropod_sysid.model.assembly import SINGULAR_MARGIN, base_singular_ratio
     from ropod_sysid.regressor import at_rest, held_joints
@@ -592,8 +696,8 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
     # the sources' coefficients on A's terms: (N, D + I, 2J), rate errors then acceleration
     coef = np.concatenate([np.concatenate([dqdd_v, p_a @ m], axis=2),
                            np.concatenate([t_map, np.zeros_like(t_map)], axis=2)], axis=1)
-    sd = np.concatenate([np.sqrt(channel_variances(noise, rates, 1)),
-                         np.sqrt(channel_variances(noise, rates, 2))], axis=1)
+    sd = np.concatenate([np.sqrt(channel_variances(noise, rates, 1, motion)),
+                         np.sqrt(channel_variances(noise, rates, 2, motion))], axis=1)
     sd[:, np.concatenate([~enc, ~enc])] = 0.0  # a leg's extension is no rotary encoder
     sd[at_rest(rows)] = 0.0  # type: ignore[arg-type]
     coef = coef * sd[:, None, :]
@@ -606,13 +710,14 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
 
 def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
                       friction: str = "per-wheel", truth: np.ndarray | None = None,
+                      motion: tuple[np.ndarray, np.ndarray] | None = None,
                       ) -> tuple[np.ndarray, np.ndarray | None]:
     """E[δA_dᵀ δA_d] (D, p, p) summed over the rows ``rows`` (a :class:`Preprocessed` of the
     row samples, or :class:`MotionRows`), per row d, from the encoders' quantisation carried
     through the fit's recipe (:func:`recipe_sensitivities`), in chunks of rows that bound its
     memory (about 64 MB); and with ``truth`` m (p,) the variance (N, D) of each row's error
     δA_d m = Σ_s (W_sd m)², the encoders' share of the rows' noise (None without ``truth``).
-    Zero with exact encoders."""
+    ``motion``: as :func:`recipe_sensitivities`'s, (N, J) each. Zero with exact encoders."""
     n, j = rows.angles.shape  # type: ignore[attr-defined]
     d, p = int(getattr(model, "n_dof", 3)), len(model.parameter_names(friction))  # type: ignore[attr-defined]
     gram = np.zeros((d, p, p))
@@ -622,8 +727,9 @@ def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
     chunk = max(256, int(8e6 // (2 * j * d * p)))
     used = None
     for k in range(0, n, chunk):
+        part = None if motion is None else (motion[0][k:k + chunk], motion[1][k:k + chunk])
         w, used = recipe_sensitivities(model, rows.take(slice(k, k + chunk)), noise,  # type: ignore[attr-defined]
-                                       friction, used=used)
+                                       friction, used=used, motion=part)
         x = np.moveaxis(w, 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
         gram += np.swapaxes(x, 1, 2) @ x
         if var is not None:

@@ -76,6 +76,20 @@ def grid_step(t: np.ndarray) -> float:
     return slope if slope > 0 else dt0
 
 
+def grid_jitter(t: np.ndarray, dt: float) -> float:
+    """The half-width [samples] of a uniform jitter of a log's sample instants, from its first
+    :data:`GRID_STEPS` sample times (as :func:`grid_step`, so that a streaming pass finds the
+    same): √3 × the standard deviation of their distances from the best straight line through
+    them at the step ``dt``; 0 for a log on its grid (:func:`on_grid`). A jittered instant
+    dithers where the encoders' count grid falls (:func:`ropod_sysid.noise.tone_share`)."""
+    head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
+    if head.size < 3 or not dt > 0 or on_grid(np.diff(head), dt):
+        return 0.0
+    k = np.round((head - head[0]) / dt)
+    dev = head - dt * k
+    return float(math.sqrt(3.0) * np.std(dev - dev.mean()) / dt)
+
+
 def on_grid(steps: np.ndarray, dt: float) -> bool:
     """Whether every time step is within :data:`UNIFORM_RTOL` of the sample time ``dt``."""
     steps = np.asarray(steps, dtype=float)
@@ -401,6 +415,7 @@ class Preprocessed:
     delays: np.ndarray | None = None  # node delays of tau (M, A, n) (DelayBracket), or None
     delay_order: int = 1  # their interpolation order (DelayBracket.order)
     degree: int = 2  # of the smoother (Span.degree: 2 LOESS, 4 quartic)
+    jitter: float = 0.0  # half-width of the sample instants' uniform jitter [samples] (grid_jitter)
 
     def window(self, start: int, stop: int) -> Preprocessed:
         """Samples start:stop (untrimmed indices) as a new block."""
@@ -412,7 +427,7 @@ class Preprocessed:
         return Preprocessed(self.t[i], self.q[i], self.qd[i], self.qdd[i], self.angles[i],
                             self.angle_rates[i], self.tau[i], self.source,
                             self.span_samples, self.dt, self.notes, 0, self.grid, self.delays,
-                            self.delay_order, self.degree)
+                            self.delay_order, self.degree, self.jitter)
 
     def row_samples(self) -> np.ndarray:
         """Indices of the samples that become equation rows (after trimming)."""
@@ -507,6 +522,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     current = log.currents
     pose = log.pose
     dt = grid_step(t)
+    jitter = grid_jitter(t, dt)
     steps = np.diff(t)
     if not on_grid(steps, dt):
         t_new, angles = signals.resample_uniform(t, angles, dt)
@@ -533,7 +549,7 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
                   nodes if nodes is not None else input_delay)  # type: ignore[arg-type]
     return Preprocessed(t, q, qd, qdd, angles_s, rates, tau, log.source, k, dt, notes, trim,
                         grid, nodes, input_delay.order(dt) if nodes is not None else 1,  # type: ignore[union-attr]
-                        span.degree)
+                        span.degree, jitter)
 
 
 def at_rest(pre: Preprocessed) -> np.ndarray:

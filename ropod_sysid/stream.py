@@ -175,6 +175,7 @@ class _Blocks:
         self.avail = 0  # samples received
         self.tri: Triangles | None = None
         self.odo: OdometryState | None = None
+        self.jitter = 0.0  # half-width of the sample instants' jitter (start(): grid_jitter)
         self.obs = ObserverStats() if params is not None else None
         # the rows of block i are reduced in a worker thread while block i+1 is smoothed (numpy
         # releases the GIL in its loops); one worker keeps the merge order of the triangles
@@ -182,8 +183,9 @@ class _Blocks:
                        if threaded else None)
         self.pending: deque[Future[None]] = deque()
 
-    def start(self, dt: float) -> None:
+    def start(self, dt: float, jitter: float = 0.0) -> None:
         self.dt = dt
+        self.jitter = jitter
         self.k = self.span.samples(dt, 0)
         if self.bracket is not None:
             self.delay = self.bracket.nodes(dt)  # b_ID at each node delay
@@ -309,7 +311,8 @@ class _Blocks:
         jq = slice(pa - qa, pb - qa)
         jr = slice(pa - r0, pb - r0)
         pre = Preprocessed(w.t[jr], q[jq], qd[jq], qdd[jq], angles[jq], rates[jq], tau[jr],
-                           self.source, k, dt, [], 0, self.grid, degree=degree)
+                           self.source, k, dt, [], 0, self.grid, degree=degree,
+                           jitter=self.jitter)
         self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)), pa, oa, ob,
                      last)
 
