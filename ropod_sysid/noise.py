@@ -220,10 +220,13 @@ def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int,
 
 
 TONE_HARMONICS = 64  # the sawtooth's harmonics tone_share follows; the rest counted white
+# tone_share: a harmonic k of a channel whose jitter spans this many of its cycles at every tap
+# (2 k |c| J ≥ 20: its coherence |χ| ≤ 1/(20π), 1.6 %) is counted white
+DITHERED = 20.0
 
 
 def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: float = 0.0,
-               harmonics: int = TONE_HARMONICS, chunk: int = 256) -> np.ndarray:
+               harmonics: int = TONE_HARMONICS) -> np.ndarray:
     """The variance of a kernel's output for an angle quantised while it moves through the
     kernel's window as x(s) = c s + ½ a s² counts (``rate`` c [counts/sample] and ``accel``
     a [counts/sample²], (N, J), at the window's centre s = 0), over the white noise's
@@ -246,7 +249,9 @@ def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: 
     (E m)_j per row kind, white share → this one: steered-four 0.16–2.47 → 0.26–0.98 (x and y
     rows 0.89–2.47 → 0.85–0.98; the θ rows' J_zz,b 0.16 → 0.26, their J_rot,s 0.49 → 0.54:
     the θ kind there is not this), the ropod's 60 s typical run at 100 Hz 0.67–1.53 →
-    0.73–1.00, its 20 s one at 1 kHz (zeros at random) 0.86–1.51 → 0.90–1.12, the off-square
+    0.73–1.00 (zeros at random 0.53–1.48 → 0.73–0.99; with the shipped sample's ±0.5 ms jitter
+    0.89–1.06 → 0.92–1.07), its 20 s one at 1 kHz (zeros at random) 0.86–1.51 → 0.90–1.12
+    (at 0, whose symmetric wheels' errors are alike: 0.63–1.58 → 0.70–1.30), the off-square
     ropod's 30 s one at 1 kHz 1.34–1.77 → 0.90–1.04, steered-swivel unchanged."""
     g = np.asarray(kernel, float)
     half = (g.size - 1) // 2
@@ -257,22 +262,35 @@ def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: 
     k = np.arange(1, harmonics + 1)
     rest = 1.0 / 12.0 - float(np.sum(1.0 / (2.0 * np.pi**2 * k**2)))
     out = np.empty(c.shape)
+    chunk = max(256, (1 << 20) // g.size)  # items at a time: arrays of about 16 MB
     flat_c, flat_a, flat_o = c.reshape(-1), a.reshape(-1), out.reshape(-1)
     for i in range(0, flat_c.size, chunk):
-        x = flat_c[i:i + chunk, None] * off + 0.5 * flat_a[i:i + chunk, None] * off**2
+        ci, ai = flat_c[i:i + chunk, None], flat_a[i:i + chunk, None]
+        cps = np.abs(ci + ai * off)  # counts per sample at each tap
+        # the harmonics below k_max stay coherent; past it the jitter has made them white
+        with np.errstate(divide="ignore"):
+            kmax = (DITHERED / (2.0 * cps.min(axis=1) * jitter) if jitter > 0
+                    else np.full(cps.shape[0], np.inf))
+        order = np.argsort(-kmax, kind="stable")
+        kmax, ci, ai, cps = kmax[order], ci[order], ai[order], cps[order]
+        x = ci * off + 0.5 * ai * off**2
         z1 = np.exp(2j * np.pi * (x - np.floor(x)))
         zk = np.ones_like(z1)
         tot = np.zeros(z1.shape[0])
-        cps = np.abs(flat_c[i:i + chunk, None] + flat_a[i:i + chunk, None] * off)
         for kk in k:
-            zk *= z1
+            n = int(np.count_nonzero(kmax > kk))  # a prefix (kmax descending)
+            weight = 1.0 / (2.0 * np.pi**2 * kk**2)
+            tot[n:] += weight * g2
+            if n == 0:
+                continue
+            zk[:n] *= z1[:n]
             if jitter > 0:  # χ_k = E e^{2πik c j}: sinc(2 k c J) for j uniform in ±J
-                chi = np.sinc(2.0 * kk * cps * jitter)
-                tot += (np.abs((zk * chi) @ g) ** 2 + (1.0 - chi**2) @ g**2) / (2.0 * np.pi**2
-                                                                               * kk**2)
+                chi = np.sinc(2.0 * kk * cps[:n] * jitter)
+                tot[:n] += weight * (np.abs((zk[:n] * chi) @ g) ** 2 + (1.0 - chi**2) @ g**2)
             else:
-                tot += np.abs(zk @ g) ** 2 / (2.0 * np.pi**2 * kk**2)
-        flat_o[i:i + chunk] = 12.0 * (tot + rest * g2) / g2
+                tot[:n] += weight * np.abs(zk[:n] @ g) ** 2
+        share = 12.0 * (tot + rest * g2) / g2
+        flat_o[i + order] = share
     return out
 
 
