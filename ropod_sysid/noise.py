@@ -219,79 +219,97 @@ def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int,
     return white * sawtooth_share(full, cps)
 
 
-TONE_HARMONICS = 64  # the sawtooth's harmonics tone_share follows; the rest counted white
-# tone_share: a harmonic k of a channel whose jitter spans this many of its cycles at every tap
-# (2 k |c| J ≥ 20: its coherence |χ| ≤ 1/(20π), 1.6 %) is counted white
-DITHERED = 20.0
+# tone_share: a channel whose jitter spreads it over this many counts (2 |c| J) is white: the
+# tone's part of each lag's covariance is then under 1/(15 w²) of the white one's (0.1 %)
+DITHERED = 8.0
+
+
+@functools.lru_cache(maxsize=16)
+def _lag_table(kernel: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A kernel's (bytes of float64) lags m ≥ 1, autocorrelation R(m) = Σ_s g_s g_(s+m), six
+    times the variance m² σ_m² of the centres of the tap pairs at lag m (weighted |g_s g_(s+m)|,
+    times m²), and ‖g‖²; lags whose pairs are all zero left out (for :func:`tone_share`)."""
+    g = np.frombuffer(kernel)
+    centre = np.arange(g.size) - 0.5 * (g.size - 1)
+    g2 = float(g @ g)
+    lags, r, spread = [], [], []
+    for m in range(1, g.size):
+        w = g[:-m] * g[m:]
+        aw = np.abs(w)
+        if aw.sum() <= 1e-15 * g2:
+            continue
+        mid = 0.5 * (centre[:-m] + centre[m:])
+        lags.append(m)
+        r.append(float(w.sum()))
+        spread.append(6.0 * m * m * float(aw @ mid**2) / float(aw.sum()))
+    return np.array(lags, float), np.array(r), np.array(spread), g2
+
+
+def _bernoulli4(x: np.ndarray) -> np.ndarray:
+    """({x} (1 − {x}))² = B₄({x}) + 1/30, in place of x: the sawtooth's autocovariance B₂/2
+    integrated twice (times 24), periodic (for :func:`tone_share`)."""
+    x -= np.floor(x)
+    x *= x - 1.0
+    x *= x
+    return x
 
 
 def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: float = 0.0,
-               harmonics: int = TONE_HARMONICS) -> np.ndarray:
+               chunk: int = 1 << 16) -> np.ndarray:
     """The variance of a kernel's output for an angle quantised while it moves through the
     kernel's window as x(s) = c s + ½ a s² counts (``rate`` c [counts/sample] and ``accel``
     a [counts/sample²], (N, J), at the window's centre s = 0), over the white noise's
-    (step²/12 ‖g‖²), expected over where the encoder's count grid lies (its zero):
+    (step²/12 ‖g‖²), expected over where the encoder's count grid lies (its zero).
 
-        share = 12 [Σ_{k=1}^{K} |Σ_s g_s e^{2πik x(−s)}|² / (2π²k²) + r_K ‖g‖²] / ‖g‖²,
+    The error e = round(x) − x [counts] of two samples whose positions differ by u counts has
+    the covariance ρ(u) = B₂({u})/2 = Σ_{k≥1} cos(2πku) / (2π²k²) over the grid's zero (B₂ the
+    second Bernoulli polynomial, {u} the fractional part; ρ(0) = 1/12, the white variance), so
+    with every harmonic of the sawtooth
 
-    the sawtooth e = step (round(x) − x) = step Σ_{k≠0} e^{2πik x} (−1)^k / (2πik) through the
-    kernel (y = Σ_s g_s e(−s)), whose harmonics past K (power r_K = 1/12 − Σ_{k≤K} 1/(2π²k²),
-    0.8 % at K = 64) are counted white. At a steady rate the error is a tone at (c mod 1)
-    cycles per sample (and its harmonics): the kernel passes it where k c is near a whole
-    number, not white noise, which a uniform spread of rates would average to; a slow angle
-    (c < 1, a = 0) gives :func:`sawtooth_share`. Sample instants jittered uniformly by ±J
-    samples (``jitter``; the log's times are the true instants, which the fit resamples)
-    shift harmonic k's phase at tap s by k c_s j: its coherent part is scaled by
-    χ = sinc(2 k |c_s| J) and the rest, Σ g_s² (1 − χ²), is white (a jitter of many counts,
-    as the shipped ropod's wheels, ±0.5 ms at 500 counts per sample, makes the error white
-    again). Measured (quantised − exact rows, zeros at 0;
-    ``benchmarks/counts.py``), predicted / empirical of the inertial columns' diagonals and
-    (E m)_j per row kind, white share → this one: steered-four 0.16–2.47 → 0.26–0.98 (x and y
-    rows 0.89–2.47 → 0.85–0.98; the θ rows' J_zz,b 0.16 → 0.26, their J_rot,s 0.49 → 0.54:
-    the θ kind there is not this), the ropod's 60 s typical run at 100 Hz 0.67–1.53 →
-    0.73–1.00 (zeros at random 0.53–1.48 → 0.73–0.99; with the shipped sample's ±0.5 ms jitter
-    0.89–1.06 → 0.92–1.07), its 20 s one at 1 kHz (zeros at random) 0.86–1.51 → 0.90–1.12
-    (at 0, whose symmetric wheels' errors are alike: 0.63–1.58 → 0.70–1.30), the off-square
-    ropod's 30 s one at 1 kHz 1.34–1.77 → 0.90–1.04, steered-swivel unchanged."""
-    g = np.asarray(kernel, float)
-    half = (g.size - 1) // 2
-    off = (half - np.arange(g.size)).astype(float)  # the sample offset −s of g's taps
-    c = np.asarray(rate, float)
-    a = np.asarray(accel, float)
-    g2 = float(np.sum(g**2))
-    k = np.arange(1, harmonics + 1)
-    rest = 1.0 / 12.0 - float(np.sum(1.0 / (2.0 * np.pi**2 * k**2)))
-    out = np.empty(c.shape)
-    chunk = max(256, (1 << 20) // g.size)  # items at a time: arrays of about 16 MB
-    flat_c, flat_a, flat_o = c.reshape(-1), a.reshape(-1), out.reshape(-1)
-    for i in range(0, flat_c.size, chunk):
-        ci, ai = flat_c[i:i + chunk, None], flat_a[i:i + chunk, None]
-        cps = np.abs(ci + ai * off)  # counts per sample at each tap
-        # the harmonics below k_max stay coherent; past it the jitter has made them white
-        with np.errstate(divide="ignore"):
-            kmax = (DITHERED / (2.0 * cps.min(axis=1) * jitter) if jitter > 0
-                    else np.full(cps.shape[0], np.inf))
-        order = np.argsort(-kmax, kind="stable")
-        kmax, ci, ai, cps = kmax[order], ci[order], ai[order], cps[order]
-        x = ci * off + 0.5 * ai * off**2
-        z1 = np.exp(2j * np.pi * (x - np.floor(x)))
-        zk = np.ones_like(z1)
-        tot = np.zeros(z1.shape[0])
-        for kk in k:
-            n = int(np.count_nonzero(kmax > kk))  # a prefix (kmax descending)
-            weight = 1.0 / (2.0 * np.pi**2 * kk**2)
-            tot[n:] += weight * g2
-            if n == 0:
-                continue
-            zk[:n] *= z1[:n]
-            if jitter > 0:  # χ_k = E e^{2πik c j}: sinc(2 k c J) for j uniform in ±J
-                chi = np.sinc(2.0 * kk * cps[:n] * jitter)
-                tot[:n] += weight * (np.abs((zk[:n] * chi) @ g) ** 2 + (1.0 - chi**2) @ g**2)
-            else:
-                tot[:n] += weight * np.abs(zk[:n] @ g) ** 2
-        share = 12.0 * (tot + rest * g2) / g2
-        flat_o[i + order] = share
-    return out
+        share = 1 + (24 / ‖g‖²) Σ_{m≥1} R(m) ρ_m(m c),
+
+    R(m) = Σ_s g_s g_(s+m) the kernel's autocorrelation. At a steady rate (a = 0) this is exact:
+    the error is a tone at (c mod 1) cycles per sample (and its harmonics), which the kernel
+    passes where k c is near a whole number, not white noise (a slow angle, c < 1, gives
+    :func:`sawtooth_share`). ρ_m is ρ seen through a triangular spread of half-width w_m,
+
+        ρ_m(u) = [Q(u + w) − 2 Q(u) + Q(u − w)] / (24 w²),   Q = ({u} (1 − {u}))²
+
+    (Q'' = 12 B₂ = 24 ρ, so this is ρ's mean over the triangle), w_m² = (2 |c| J)² + 6 m² a² σ_m²
+    (at least 10⁻⁸): sample instants jittered uniformly by ±J samples (``jitter``; the log's
+    times are the true instants, which the fit resamples) move each sample's position by
+    c j, the difference of two such moves is triangular over ±2 |c| J (exact at a = 0: the
+    harmonic k of a pair's covariance scaled by sinc²(2 k c J)); under an acceleration the
+    pairs at lag m, centred at μ, differ by m (c + a μ) counts, and their centres' spread σ_m
+    (weighted |g_s g_(s+m)|) is taken as a triangle of the same variance (6 m² a² σ_m² = w²).
+    A jitter that spreads a channel over ``DITHERED`` counts or more makes its error white
+    (share 1); a channel at rest has none (0). Exact (all harmonics) for a = 0; against the
+    sum over 256 harmonics with each tap's own rate and jitter (the exact quadratic motion) the
+    share of the steady wheels agrees to round-off, and the accelerated channels' spread
+    about the tone model averages out (measured below, ``benchmarks/counts.py``). O(N J L) for
+    a kernel of L taps, in chunks of about ``chunk`` lags × channels."""
+    lags, r, spread, g2 = _lag_table(np.ascontiguousarray(kernel, float).tobytes())
+    c = np.abs(np.asarray(rate, float)).reshape(-1)
+    a2 = np.asarray(accel, float).reshape(-1) ** 2
+    dither = (2.0 * jitter * c) ** 2
+    out = np.ones(c.size)
+    moving = (c > 0) | (a2 > 0)
+    out[~moving] = 0.0
+    work = np.flatnonzero(moving & (dither < DITHERED**2))
+    rows = max(1, chunk // max(lags.size, 1))
+    for i in range(0, work.size, rows):
+        sel = work[i:i + rows]
+        u = c[sel, None] * lags
+        u -= np.floor(u)  # (ρ has period 1; small w then keeps its digits)
+        w2 = dither[sel, None] + a2[sel, None] * spread
+        np.maximum(w2, 1e-8, out=w2)
+        w = np.sqrt(w2)
+        rho = _bernoulli4(u + w)
+        rho += _bernoulli4(u - w)
+        rho -= 2.0 * _bernoulli4(u)
+        rho /= w2  # 24 ρ_m
+        out[sel] = 1.0 + (rho @ r) / g2
+    return np.maximum(out, 0.0).reshape(np.shape(rate))
 
 
 def window_motion(pre: object, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
