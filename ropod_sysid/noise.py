@@ -33,12 +33,13 @@ E[m̂ − m] ≈ −(ÃᵀÃ + E[δÃᵀδÃ])⁻¹ E[δÃᵀδÃ] m. E[δAᵀδ
 :func:`recipe_error_gram`, for both sides: what ``fit --encoder-counts`` subtracts from a log's
 normal equations (:func:`fit_error_gram`) and what ``trajectory check`` and ``optimize`` predict
 for a planned run (:func:`planned_rows`: the same recipe at the planned states; on the same rows
-the two grams are equal but for each channel's share: the fit's follows the log's motion
-through each row's window, :func:`tone_share`, a planned row's its rate,
-:func:`sawtooth_share`). Measured against the quantised − exact rows of steered-swivel and
-legs-exact, its inertial columns' diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65,
-cause not found); the base rows' variance of δA m on steered-swivel within 0.77–0.84 (the
-steering rows' 0.12–0.24, cause not found). Through the swivel's caster offset the pivots'
+and given the same motion through the rows' windows, :func:`window_motion`, whose
+:func:`tone_share` the fit takes for each channel, the two grams are equal; a planned run
+without it takes each channel's share from its rows' rates, :func:`sawtooth_share`). Measured
+against the quantised − exact rows of steered-swivel and legs-exact, its inertial columns'
+diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65, cause not found); the base rows'
+variance of δA m on steered-swivel within 0.77–0.84 (the steering rows' 0.12–0.24, cause not
+found). Through the swivel's caster offset the pivots'
 acceleration carries q̈ / d, so the unit-inertia columns carry q̈'s errors a hundredfold: this
 bias, not σ, limits a run that a white-noise criterion calls excellent. It does not shrink with
 the run's length. (Measured, 20 seeds: on the 37 s typical and optimised runs of the off-square

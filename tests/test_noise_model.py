@@ -248,18 +248,19 @@ def steered_swivel_rows():
 def test_the_planned_runs_encoder_errors_are_the_fits_on_the_same_rows(steered_swivel_rows):
     """Issue 14 item 6: ``trajectory check`` carries the encoders' errors through the fit's
     own recipe. Given the row samples of the quantised steered-swivel log as its planned
-    motion, the planned-run path (what :func:`stacked_regressor` calls) returns the error gram
-    of the fit's recipe at those rows (:func:`recipe_error_gram`) to round-off: what
-    ``fit --encoder-counts`` subtracts (:func:`fit_error_gram`) but for each channel's share,
-    which the fit takes from the log's motion through each row's window (:func:`tone_share`),
-    a planned run's rows from their rates (:func:`sawtooth_share`); and the rows'
-    encoder variance it adds to σ̂², the variance of δA m, is the measured one of the filtered
-    rows' (quantised − exact) A m on the base rows to 0.7–1.3 (measured 0.84, 0.77, 0.81 for
-    x, y, θ; the old chain, q̈'s errors through the odometry gain alone: 1.14, 1.30, 0.27).
-    The steering rows' variance it puts 4–8× low (measured 0.12, 0.24; the old chain the
-    same), not asserted: a cause not found, and a small share of σ̂² (those rows' variance is
-    30–60× smaller than the base rows')."""
-    from ropod_sysid.noise import kind_grams, recipe_error_gram
+    motion (with each channel's motion through the rows' windows, :func:`window_motion`, from
+    which the fit takes each channel's share, :func:`tone_share`), the planned-run path (what
+    :func:`stacked_regressor` calls) returns the error gram ``fit --encoder-counts`` subtracts
+    (:func:`fit_error_gram`) to round-off (``trajectory check`` itself has no such windows and
+    takes the :func:`sawtooth_share` of its rows' rates); and the rows' encoder variance it
+    adds to σ̂², the variance of δA m, is the measured one of the filtered rows' (quantised −
+    exact) A m on the base rows to 0.7–1.3 (measured 0.82, 0.75, 0.80 for x, y, θ; with the
+    rates' sawtooth share 0.84, 0.77, 0.81; the old chain, q̈'s errors through the odometry
+    gain alone: 1.14, 1.30, 0.27). The steering rows' variance it puts 4–8× low (measured
+    0.12, 0.26; with the sawtooth share 0.12, 0.24; the old chain the same), not asserted: a
+    cause not found, and a small share of σ̂² (those rows' variance is 30–60× smaller than
+    the base rows')."""
+    from ropod_sysid.noise import fit_error_gram, window_motion
     from ropod_sysid.trajectory.identifiability import _regressor_rows
 
     pf, truth, model, _, _, pre, a_e, a_q = steered_swivel_rows
@@ -270,8 +271,9 @@ def test_the_planned_runs_encoder_errors_are_the_fits_on_the_same_rows(steered_s
     qd = np.concatenate([pre.qd, pre.angle_rates[:, own]], axis=1)
     _, var, gram = _regressor_rows(model, pre.q[rows], qd[rows], pre.qdd[rows],
                                    pre.angles[rows], "per-wheel", noise=(truth, sensors),
-                                   angle_rates=pre.angle_rates[rows])
-    fit = kind_grams(recipe_error_gram(model, pre.take(rows), sensors)[0])
+                                   angle_rates=pre.angle_rates[rows],
+                                   motion=window_motion(pre, rows))
+    fit = fit_error_gram(model, pre, rows, 2**14, stride=1)  # (the fit: every third row)
     np.testing.assert_allclose(gram, fit, rtol=1e-10, atol=1e-12 * np.abs(fit).max())
     m = truth.vector(model.parameter_names())
     err = (a_q - a_e) @ m  # (N, D): the rows' error from the encoders (no current noise)

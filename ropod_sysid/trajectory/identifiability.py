@@ -53,6 +53,7 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
                     angles: np.ndarray, friction: str, chunk: int = 20000,
                     noise: tuple[object, object] | None = None,
                     angle_rates: np.ndarray | None = None,
+                    motion: tuple[np.ndarray, np.ndarray] | None = None,
                     ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A_ID,ext (M, D, p) at M samples with unit angles (M, J) (chunked to bound the memory);
     the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a) unless
@@ -62,7 +63,10 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
     (:func:`~ropod_sysid.noise.row_variances`) and the encoders' error gram of A per row kind
     (3, p, p), both from the errors carried through the fit's own recipe
     (:func:`~ropod_sysid.noise.recipe_error_gram`, the one ``fit --encoder-counts``
-    subtracts; :func:`~ropod_sysid.noise.kind_grams`)."""
+    subtracts; :func:`~ropod_sysid.noise.kind_grams`). ``motion``: each channel's rate and
+    acceleration through the rows' windows ((M, J) each; :func:`~ropod_sysid.noise.window_motion`
+    of a log), whose :func:`~ropod_sysid.noise.tone_share` the encoders' errors then take, as
+    the fit's do (None: the :func:`~ropod_sysid.noise.sawtooth_share` of the rows' rates)."""
     from ropod_sysid.noise import kind_grams, planned_rows, recipe_error_gram, row_variances
 
     out, var = [], []
@@ -81,7 +85,9 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
             params, sensors = noise
             rows = planned_rows(model, q[sl], qd[sl], qdd[sl], angles[sl], rates)
             truth = params.vector(model.parameter_names(friction))  # type: ignore[attr-defined]
-            g, enc = recipe_error_gram(model, rows, sensors, friction, truth)  # type: ignore[arg-type]
+            part = None if motion is None else (motion[0][sl], motion[1][sl])
+            g, enc = recipe_error_gram(model, rows, sensors, friction, truth,  # type: ignore[arg-type]
+                                       motion=part)
             var.append(row_variances(model, rows, params, sensors, friction, encoder=enc))  # type: ignore[arg-type]
             gram = gram + kind_grams(g)
     a = np.concatenate(out, axis=0)
