@@ -223,27 +223,48 @@ def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int,
 # tone_share: a channel whose jitter spreads it over this many counts (2 |c| J) is white: the
 # tone's part of each lag's covariance is then under 1/(15 w²) of the white one's (0.1 %)
 DITHERED = 8.0
+# tone_share: about this many (lag, node) terms per channel and row: 7 nodes per lag for the
+# kernels of 100–200 Hz logs (L ≈ 25–45 taps), 3 at 1 kHz (L ≈ 205), 1 for longer kernels
+TONE_TERMS = 640
+
+
+def tone_nodes(size: int) -> int:
+    """Nodes per lag (odd, 1–7) of :func:`tone_share` for a kernel of ``size`` taps."""
+    q = max(1, min(7, TONE_TERMS // max(size, 1)))
+    return q if q % 2 else q - 1
 
 
 @functools.lru_cache(maxsize=16)
-def _lag_table(kernel: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """A kernel's (bytes of float64) lags m ≥ 1, autocorrelation R(m) = Σ_s g_s g_(s+m), six
-    times the variance m² σ_m² of the centres of the tap pairs at lag m (weighted |g_s g_(s+m)|,
-    times m²), and ‖g‖²; lags whose pairs are all zero left out (for :func:`tone_share`)."""
+def _lag_table(kernel: bytes, nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                     np.ndarray, float]:
+    """A kernel's (bytes of float64) pairs of taps grouped for :func:`tone_share`: for each lag
+    m ≥ 1 its pairs (s, s + m) in ``nodes`` groups of about equal Σ |g_s g_(s+m)| in the order of
+    their centres μ (offsets from the kernel's middle), each group a row of (m, its Σ g_s
+    g_(s+m), its centre and 6 m² times its variance of the centres, both weighted
+    |g_s g_(s+m)|); and ‖g‖². Lags whose pairs are all zero are left out."""
     g = np.frombuffer(kernel)
     centre = np.arange(g.size) - 0.5 * (g.size - 1)
     g2 = float(g @ g)
-    lags, r, spread = [], [], []
+    rows = []
     for m in range(1, g.size):
         w = g[:-m] * g[m:]
         aw = np.abs(w)
-        if aw.sum() <= 1e-15 * g2:
+        total = float(aw.sum())
+        if total <= 1e-15 * g2:
             continue
         mid = 0.5 * (centre[:-m] + centre[m:])
-        lags.append(m)
-        r.append(float(w.sum()))
-        spread.append(6.0 * m * m * float(aw @ mid**2) / float(aw.sum()))
-    return np.array(lags, float), np.array(r), np.array(spread), g2
+        share = (np.cumsum(aw) - 0.5 * aw) / total
+        group = np.minimum((share * nodes).astype(int), nodes - 1)
+        for q in range(nodes):
+            sel = (group == q) & (aw > 0)
+            if not sel.any():
+                continue
+            t = float(aw[sel].sum())
+            mu = float(aw[sel] @ mid[sel]) / t
+            var = float(aw[sel] @ (mid[sel] - mu) ** 2) / t
+            rows.append((m, float(w[sel].sum()), mu, 6.0 * m * m * var))
+    lag, weight, mu, spread = (np.array(v) for v in zip(*rows, strict=True))
+    return lag, weight, mu, spread, g2
 
 
 def _bernoulli4(x: np.ndarray) -> np.ndarray:
@@ -256,10 +277,10 @@ def _bernoulli4(x: np.ndarray) -> np.ndarray:
 
 
 def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: float = 0.0,
-               chunk: int = 1 << 16) -> np.ndarray:
+               nodes: int | None = None, chunk: int = 1 << 16) -> np.ndarray:
     """The variance of a kernel's output for an angle quantised while it moves through the
-    kernel's window as x(s) = c s + ½ a s² counts (``rate`` c [counts/sample] and ``accel``
-    a [counts/sample²], (N, J), at the window's centre s = 0), over the white noise's
+    kernel's window as x(μ) = c μ + ½ a μ² counts (``rate`` c [counts/sample] and ``accel``
+    a [counts/sample²], (N, J), μ the offset from the window's centre), over the white noise's
     (step²/12 ‖g‖²), expected over where the encoder's count grid lies (its zero).
 
     The error e = round(x) − x [counts] of two samples whose positions differ by u counts has
@@ -267,49 +288,56 @@ def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: 
     second Bernoulli polynomial, {u} the fractional part; ρ(0) = 1/12, the white variance), so
     with every harmonic of the sawtooth
 
-        share = 1 + (24 / ‖g‖²) Σ_{m≥1} R(m) ρ_m(m c),
+        share = 1 + (24 / ‖g‖²) Σ_{m≥1} Σ_{s} g_s g_(s+m) ρ(x(μ_s + m) − x(μ_s)),
 
-    R(m) = Σ_s g_s g_(s+m) the kernel's autocorrelation. At a steady rate (a = 0) this is exact:
-    the error is a tone at (c mod 1) cycles per sample (and its harmonics), which the kernel
-    passes where k c is near a whole number, not white noise (a slow angle, c < 1, gives
-    :func:`sawtooth_share`). ρ_m is ρ seen through a triangular spread of half-width w_m,
+    and a pair at lag m centred at μ differs by m (c + a μ) counts. At a steady rate (a = 0)
+    this is Σ_m R(m) ρ(m c), R the kernel's autocorrelation: the error is a tone at (c mod 1)
+    cycles per sample (and its harmonics), which the kernel passes where k c is near a whole
+    number, not white noise (a slow angle, c < 1, gives :func:`sawtooth_share`). Each lag's
+    pairs are taken in ``nodes`` groups by their centres (:func:`_lag_table`; default
+    :func:`tone_nodes` of the kernel's length, which bounds the work), each at its mean centre
+    μ_q with the spread of its centres as a triangle of the same variance, together with the
+    jitter: sample instants jittered uniformly by ±J samples (``jitter``; the log's times are
+    the true instants, which the fit resamples) move a sample's position by r j (r = c + a μ_q),
+    the difference of two such moves is triangular over ±2 |r| J (for a steady rate exact: the
+    harmonic k of a pair's covariance scaled by sinc²(2 k r J)). ρ through a triangle of
+    half-width w is
 
-        ρ_m(u) = [Q(u + w) − 2 Q(u) + Q(u − w)] / (24 w²),   Q = ({u} (1 − {u}))²
+        [Q(u + w) − 2 Q(u) + Q(u − w)] / (24 w²),   Q = ({u} (1 − {u}))²
 
-    (Q'' = 12 B₂ = 24 ρ, so this is ρ's mean over the triangle), w_m² = (2 |c| J)² + 6 m² a² σ_m²
-    (at least 10⁻⁸): sample instants jittered uniformly by ±J samples (``jitter``; the log's
-    times are the true instants, which the fit resamples) move each sample's position by
-    c j, the difference of two such moves is triangular over ±2 |c| J (exact at a = 0: the
-    harmonic k of a pair's covariance scaled by sinc²(2 k c J)); under an acceleration the
-    pairs at lag m, centred at μ, differ by m (c + a μ) counts, and their centres' spread σ_m
-    (weighted |g_s g_(s+m)|) is taken as a triangle of the same variance (6 m² a² σ_m² = w²).
-    A jitter that spreads a channel over ``DITHERED`` counts or more makes its error white
-    (share 1); a channel at rest has none (0). Exact (all harmonics) for a = 0; against the
-    sum over 256 harmonics with each tap's own rate and jitter (the exact quadratic motion) the
-    share of the steady wheels agrees to round-off, and the accelerated channels' spread
-    about the tone model averages out (measured below, ``benchmarks/counts.py``). O(N J L) for
-    a kernel of L taps, in chunks of about ``chunk`` lags × channels."""
-    lags, r, spread, g2 = _lag_table(np.ascontiguousarray(kernel, float).tobytes())
-    c = np.abs(np.asarray(rate, float)).reshape(-1)
-    a2 = np.asarray(accel, float).reshape(-1) ** 2
-    dither = (2.0 * jitter * c) ** 2
+    (Q'' = 12 B₂ = 24 ρ), w² = (2 r J)² + 6 m² a² σ_q² (at least 10⁻⁸). A jitter that spreads a
+    channel over ``DITHERED`` counts or more makes its error white (share 1); a channel at rest
+    has none (0). Exact at a steady rate without jitter; against the sum over the harmonics
+    with each tap's own rate and jitter (the exact quadratic motion) the grams of
+    ``benchmarks/counts.py``'s runs agree within 1.3 % on the inertial columns' diagonals.
+    O(N J L nodes), in chunks of about ``chunk`` terms."""
+    g = np.ascontiguousarray(kernel, float)
+    q = tone_nodes(g.size) if nodes is None else int(nodes)
+    lag, weight, mu, spread, g2 = _lag_table(g.tobytes(), q)
+    c = np.asarray(rate, float).reshape(-1)
+    a = np.asarray(accel, float).reshape(-1)
+    dj = (2.0 * jitter) ** 2
     out = np.ones(c.size)
-    moving = (c > 0) | (a2 > 0)
+    moving = (c != 0) | (a != 0)
     out[~moving] = 0.0
-    work = np.flatnonzero(moving & (dither < DITHERED**2))
-    rows = max(1, chunk // max(lags.size, 1))
+    work = np.flatnonzero(moving & (dj * c * c < DITHERED**2))
+    rows = max(1, chunk // lag.size)
     for i in range(0, work.size, rows):
         sel = work[i:i + rows]
-        u = c[sel, None] * lags
-        u -= np.floor(u)  # (ρ has period 1; small w then keeps its digits)
-        w2 = dither[sel, None] + a2[sel, None] * spread
+        r = c[sel, None] + a[sel, None] * mu  # each node's rate
+        u = r * lag
+        u -= np.floor(u)  # (ρ has period 1; a small w then keeps its digits)
+        w2 = dj * r * r
+        w2 += a[sel, None] ** 2 * spread
         np.maximum(w2, 1e-8, out=w2)
         w = np.sqrt(w2)
         rho = _bernoulli4(u + w)
         rho += _bernoulli4(u - w)
-        rho -= 2.0 * _bernoulli4(u)
-        rho /= w2  # 24 ρ_m
-        out[sel] = 1.0 + (rho @ r) / g2
+        u *= u - 1.0
+        u *= u
+        rho -= 2.0 * u
+        rho /= w2  # 24 ρ
+        out[sel] = 1.0 + (rho @ weight) / g2
     return np.maximum(out, 0.0).reshape(np.shape(rate))
 
 
