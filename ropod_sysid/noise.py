@@ -226,6 +226,9 @@ DITHERED = 8.0
 # tone_share: about this many (lag, node) terms per channel and row: 7 nodes per lag for the
 # kernels of 100–200 Hz logs (L ≈ 25–45 taps), 3 at 1 kHz (L ≈ 205), 1 for longer kernels
 TONE_TERMS = 640
+# tone_share takes its nodes for a channel whose acceleration a bends its motion over the
+# kernel's L taps by |a| L² ≥ CHIRP_BENT counts, else one node per lag (they would coincide)
+CHIRP_BENT = 1.0
 
 
 def tone_nodes(size: int) -> int:
@@ -245,7 +248,7 @@ def _lag_table(kernel: bytes, nodes: int) -> tuple[np.ndarray, np.ndarray, np.nd
     g = np.frombuffer(kernel)
     centre = np.arange(g.size) - 0.5 * (g.size - 1)
     g2 = float(g @ g)
-    rows = []
+    parts = []
     for m in range(1, g.size):
         w = g[:-m] * g[m:]
         aw = np.abs(w)
@@ -253,17 +256,15 @@ def _lag_table(kernel: bytes, nodes: int) -> tuple[np.ndarray, np.ndarray, np.nd
         if total <= 1e-15 * g2:
             continue
         mid = 0.5 * (centre[:-m] + centre[m:])
-        share = (np.cumsum(aw) - 0.5 * aw) / total
-        group = np.minimum((share * nodes).astype(int), nodes - 1)
-        for q in range(nodes):
-            sel = (group == q) & (aw > 0)
-            if not sel.any():
-                continue
-            t = float(aw[sel].sum())
-            mu = float(aw[sel] @ mid[sel]) / t
-            var = float(aw[sel] @ (mid[sel] - mu) ** 2) / t
-            rows.append((m, float(w[sel].sum()), mu, 6.0 * m * m * var))
-    lag, weight, mu, spread = (np.array(v) for v in zip(*rows, strict=True))
+        group = np.minimum(((np.cumsum(aw) - 0.5 * aw) * (nodes / total)).astype(int), nodes - 1)
+        t = np.bincount(group, aw, nodes)
+        mu = np.bincount(group, aw * mid, nodes) / np.where(t > 0, t, 1.0)
+        var = np.bincount(group, aw * mid**2, nodes) / np.where(t > 0, t, 1.0) - mu**2
+        keep = t > 0
+        parts.append(np.column_stack([np.full(keep.sum(), float(m)),
+                                      np.bincount(group, w, nodes)[keep], mu[keep],
+                                      6.0 * m * m * np.maximum(var[keep], 0.0)]))
+    lag, weight, mu, spread = np.concatenate(parts).T
     return lag, weight, mu, spread, g2
 
 
@@ -313,17 +314,29 @@ def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: 
     O(N J L nodes), in chunks of about ``chunk`` terms."""
     g = np.ascontiguousarray(kernel, float)
     q = tone_nodes(g.size) if nodes is None else int(nodes)
-    lag, weight, mu, spread, g2 = _lag_table(g.tobytes(), q)
     c = np.asarray(rate, float).reshape(-1)
     a = np.asarray(accel, float).reshape(-1)
     dj = (2.0 * jitter) ** 2
     out = np.ones(c.size)
     moving = (c != 0) | (a != 0)
     out[~moving] = 0.0
-    work = np.flatnonzero(moving & (dj * c * c < DITHERED**2))
+    work = moving & (dj * c * c < DITHERED**2)
+    fine = work & (np.abs(a) * g.size**2 >= CHIRP_BENT) if q > 1 else np.zeros_like(work)
+    for nq, sel in ((1, work & ~fine), (q, fine)):
+        if sel.any():
+            out[sel] = _tone_terms(_lag_table(g.tobytes(), nq), c[sel], a[sel], dj, chunk)
+    return np.maximum(out, 0.0).reshape(np.shape(rate))
+
+
+def _tone_terms(table: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float],
+                c: np.ndarray, a: np.ndarray, dj: float, chunk: int) -> np.ndarray:
+    """:func:`tone_share`'s sum over the (lag, node) rows of ``table`` (:func:`_lag_table`) for
+    channels at rates c and accelerations a (n,), ``dj`` = (2 J)²."""
+    lag, weight, mu, spread, g2 = table
+    out = np.empty(c.size)
     rows = max(1, chunk // lag.size)
-    for i in range(0, work.size, rows):
-        sel = work[i:i + rows]
+    for i in range(0, c.size, rows):
+        sel = slice(i, i + rows)
         r = c[sel, None] + a[sel, None] * mu  # each node's rate
         u = r * lag
         u -= np.floor(u)  # (ρ has period 1; a small w then keeps its digits)
@@ -338,7 +351,7 @@ def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: 
         rho -= 2.0 * u
         rho /= w2  # 24 ρ
         out[sel] = 1.0 + (rho @ weight) / g2
-    return np.maximum(out, 0.0).reshape(np.shape(rate))
+    return out
 
 
 def window_motion(pre: object, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
