@@ -278,7 +278,7 @@ def _bernoulli4(x: np.ndarray) -> np.ndarray:
 
 
 def tone_share(kernel: np.ndarray, rate: np.ndarray, accel: np.ndarray, jitter: float = 0.0,
-               nodes: int | None = None, chunk: int = 1 << 16) -> np.ndarray:
+               nodes: int | None = None, chunk: int = 1 << 15) -> np.ndarray:
     """The variance of a kernel's output for an angle quantised while it moves through the
     kernel's window as x(μ) = c μ + ½ a μ² counts (``rate`` c [counts/sample] and ``accel``
     a [counts/sample²], (N, J), μ the offset from the window's centre), over the white noise's
@@ -340,8 +340,9 @@ def _tone_terms(table: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, flo
         r = c[sel, None] + a[sel, None] * mu  # each node's rate
         u = r * lag
         u -= np.floor(u)  # (ρ has period 1; a small w then keeps its digits)
-        w2 = dj * r * r
-        w2 += a[sel, None] ** 2 * spread
+        w2 = a[sel, None] ** 2 * spread
+        if dj > 0:
+            w2 += dj * r * r
         np.maximum(w2, 1e-8, out=w2)
         w = np.sqrt(w2)
         rho = _bernoulli4(u + w)
