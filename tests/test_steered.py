@@ -522,7 +522,8 @@ def test_four_wheels_noisy_logs_are_covered_by_sigma(four_sample) -> None:
     """The same logs as 2¹⁴-count encoders and 30 mA current noise record them: every value
     the plain fit determines within 3σ of the truth's combination (over seeds 1–6 the largest
     is J_zz,b's, 2.2–2.9σ: the encoders' bias, −1.7 to −2.0 %; ``--encoder-counts``
-    over-corrects m_b on these logs, up to 5.8σ); seed 2 here."""
+    over-corrects m_b on these logs, +0.8 to +4.2σ off the truth's combination; +1.9 to +6.2σ
+    with a white share per encoder); seed 2 here."""
     pf, truth, logs = four_sample
     sensors = Sensors(encoder_counts=2**14, current_noise=0.03)
     rng = np.random.default_rng(2)
