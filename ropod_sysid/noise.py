@@ -246,26 +246,31 @@ def _lag_table(kernel: bytes, nodes: int) -> tuple[np.ndarray, np.ndarray, np.nd
     g_(s+m), its centre and 6 m² times its variance of the centres, both weighted
     |g_s g_(s+m)|); and ‖g‖². Lags whose pairs are all zero are left out."""
     g = np.frombuffer(kernel)
-    centre = np.arange(g.size) - 0.5 * (g.size - 1)
     g2 = float(g @ g)
-    parts = []
-    for m in range(1, g.size):
-        w = g[:-m] * g[m:]
-        aw = np.abs(w)
-        total = float(aw.sum())
-        if total <= 1e-15 * g2:
-            continue
-        mid = 0.5 * (centre[:-m] + centre[m:])
-        group = np.minimum(((np.cumsum(aw) - 0.5 * aw) * (nodes / total)).astype(int), nodes - 1)
-        t = np.bincount(group, aw, nodes)
-        mu = np.bincount(group, aw * mid, nodes) / np.where(t > 0, t, 1.0)
-        var = np.bincount(group, aw * mid**2, nodes) / np.where(t > 0, t, 1.0) - mu**2
-        keep = t > 0
-        parts.append(np.column_stack([np.full(keep.sum(), float(m)),
-                                      np.bincount(group, w, nodes)[keep], mu[keep],
-                                      6.0 * m * m * np.maximum(var[keep], 0.0)]))
-    lag, weight, mu, spread = np.concatenate(parts).T
-    return lag, weight, mu, spread, g2
+    first, second = np.triu_indices(g.size, 1)
+    order = np.lexsort((first, second - first))  # by lag, then by centre
+    first, second = first[order], second[order]
+    lag = second - first
+    w = g[first] * g[second]
+    aw = np.abs(w)
+    mid = 0.5 * (first + second) - 0.5 * (g.size - 1)
+    start = np.flatnonzero(np.r_[True, lag[1:] != lag[:-1]])  # each lag's first pair
+    which = np.repeat(np.arange(start.size), np.diff(np.r_[start, lag.size]))
+    total = np.add.reduceat(aw, start)
+    cum = np.cumsum(aw)
+    within = cum - np.r_[0.0, cum][start][which] - 0.5 * aw  # |w| before the pair, in its lag
+    group = np.minimum((within * (nodes / np.maximum(total, 1e-300))[which]).astype(int),
+                       nodes - 1)
+    key = which * nodes + group
+    size = start.size * nodes
+    t = np.bincount(key, aw, size)
+    keep = (t > 0) & np.repeat(total > 1e-15 * g2, nodes)
+    t = np.where(keep, t, 1.0)
+    mu = np.bincount(key, aw * mid, size) / t
+    var = np.maximum(np.bincount(key, aw * mid**2, size) / t - mu**2, 0.0)
+    m = np.repeat(lag[start], nodes).astype(float)
+    return (m[keep], np.bincount(key, w, size)[keep], mu[keep], 6.0 * m[keep] ** 2 * var[keep],
+            g2)
 
 
 def _bernoulli4(x: np.ndarray) -> np.ndarray:
