@@ -39,13 +39,13 @@ without it takes each channel's share from its rows' rates, :func:`sawtooth_shar
 against the quantised − exact rows of steered-swivel and legs-exact, its inertial columns'
 diagonals agree within 0.8–1.1 (the legs' J_st 0.5–0.65, cause not found); the base rows'
 variance of δA m on steered-swivel within 0.77–0.84 (the steering rows' 0.12–0.24, cause not
-found). Through the swivel's caster offset the pivots'
-acceleration carries q̈ / d, so the unit-inertia columns carry q̈'s errors a hundredfold: this
-bias, not σ, limits a run that a white-noise criterion calls excellent. It does not shrink with
-the run's length. (Measured, 20 seeds: on the 37 s typical and optimised runs of the off-square
-ropod the predicted and the fits' mean errors agree within 1–7 %; on the 30 s typical run they
-do not — −1.8 kg predicted for m_b, +0.7 ± 0.3 kg fitted — for a reason not found.) The errors
-of A's angle-dependent columns are second order and left out.
+found). Through the swivel's caster offset the pivots' acceleration carries q̈ / d, so the
+unit-inertia columns carry q̈'s errors a hundredfold: this bias, not σ, limits a run that a
+white-noise criterion calls excellent. It does not shrink with the run's length. (Measured,
+20 seeds: on the 37 s typical and optimised runs of the off-square ropod the predicted and the
+fits' mean errors agree within 1–7 %; on the 30 s typical run they do not — −1.8 kg predicted
+for m_b, +0.7 ± 0.3 kg fitted — for a reason not found.) The errors of A's angle-dependent
+columns are second order and left out.
 """
 
 from __future__ import annotations
