@@ -27,7 +27,7 @@ the predicted gram is printed too, −(ÃᵀÃ)⁻¹ Ẽ m as a fraction of the 
 encoder channel's rate and acceleration at the rows, carried through the fit's own recipe
 (odometry twist, :meth:`PlatformModel.consistent_motion`, the held joints, the rows at rest,
 a_id_ext) by central differences; a channel that moves less than a count per sample has the
-variance of a sampled sawtooth (:func:`ropod_sysid.noise.sawtooth_share`), not the white one
+variance of a sampled sawtooth (:func:`ropod_sysid.quantisation.sawtooth_share`), not the white one
 times its counts per sample. About 10 s per 3000-row log (the library's: 0.6 s).
 """
 
@@ -50,14 +50,13 @@ from ropod_sysid.noise import (  # noqa: E402
     SensorNoise,
     _encoders,
     acceleration_kernel,
-    encoder_variance,
     fit_error_gram,
     kind_grams,
     row_kernel,
-    sawtooth_share,
     velocity_kernel,
 )
 from ropod_sysid.odometry import base_twist  # noqa: E402
+from ropod_sysid.quantisation import encoder_variance, sawtooth_share  # noqa: E402
 from ropod_sysid.regressor import (  # noqa: E402
     Preprocessed,
     at_rest,

@@ -65,7 +65,7 @@ def delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
     The criterion is the residual variance of the fit the logs get: corrected for the
     encoders' errors in A with ``--encoder-counts`` (:func:`corrected_triangle`, its ρ²:
     :func:`corrected_factor`). Without it, when every log's angles move by whole counts of
-    2π/N (:func:`ropod_sysid.noise.detect_encoder_counts`, on each log's first chunk), the
+    2π/N (:func:`ropod_sysid.quantisation.detect_encoder_counts`, on each log's first chunk), the
     pass formed the gram of the detected N (that of ``--encoder-counts N``, on the search's
     sparser rows: :func:`ropod_sysid.noise.search_gram_stride`) and the criterion is corrected
     all the same, so that the delay found is the one ``--encoder-counts N`` finds (within

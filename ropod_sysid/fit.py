@@ -22,7 +22,6 @@ from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.units import FRICTION_VARIANTS
-from ropod_sysid.noise import counts_note, detect_encoder_counts
 from ropod_sysid.params import (
     DISSIPATIVE_SIGN,
     UNITS_OF,
@@ -35,6 +34,7 @@ from ropod_sysid.params import (
     parameter_names,
 )
 from ropod_sysid.platform import Platform
+from ropod_sysid.quantisation import counts_note, detect_encoder_counts
 from ropod_sysid.regressor import (
     DelayBracket,
     Span,

@@ -81,7 +81,7 @@ def grid_jitter(t: np.ndarray, dt: float) -> float:
     :data:`GRID_STEPS` sample times (as :func:`grid_step`, so that a streaming pass finds the
     same): √3 × the standard deviation of their distances from the best straight line through
     them at the step ``dt``; 0 for a log on its grid (:func:`on_grid`). A jittered instant
-    dithers where the encoders' count grid falls (:func:`ropod_sysid.noise.tone_share`)."""
+    dithers where the encoders' count grid falls (:func:`ropod_sysid.quantisation.tone_share`)."""
     head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
     if head.size < 3 or not dt > 0 or on_grid(np.diff(head), dt):
         return 0.0

@@ -146,7 +146,7 @@ class Triangles:
     error_gram: np.ndarray | None = field(default=None, repr=False)
     per_row: tuple[int, int, int] = (1, 1, 1)  # rows of each kind per sample (row_kinds)
     # the encoders' counts per revolution error_gram is for: given (--encoder-counts) or, for
-    # the delay search alone, detected in the log (ropod_sysid.noise.detect_encoder_counts)
+    # the delay search alone, detected in the log (ropod_sysid.quantisation.detect_encoder_counts)
     error_counts: int | None = None
 
     @property

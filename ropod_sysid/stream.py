@@ -23,7 +23,7 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
    next). With ``--input-delay auto`` b_ID is formed for each node delay of the bracket
    (:class:`ropod_sysid.regressor.DelayBracket`), the window reaching back and ahead by the
    largest delays; without ``--encoder-counts``, when the first chunk's angles move by whole
-   counts (:func:`ropod_sysid.noise.detect_encoder_counts`), also the error gram of those
+   counts (:func:`ropod_sysid.quantisation.detect_encoder_counts`), also the error gram of those
    counts (:func:`ropod_sysid.noise.fit_error_gram`, on the search's sparser rows:
    :func:`ropod_sysid.noise.search_gram_stride`), for the search's criterion alone
    (:func:`ropod_sysid.delay.delay_search`).
@@ -377,7 +377,7 @@ class _Run:
 
     def push(self, log: Log) -> None:
         if not self.raw:
-            from ropod_sysid.noise import counts_note, detect_encoder_counts
+            from ropod_sysid.quantisation import counts_note, detect_encoder_counts
 
             self.t0 = float(log.t[0])
             enc = log.layout.encoders

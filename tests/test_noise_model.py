@@ -211,7 +211,7 @@ def test_encoder_counts_are_detected_from_the_angles_steps_not_from_a_writers_ro
     """Angles that move by whole counts of 2π/16384 are recognised as 16384-count encoders
     (wrapped channels taken modulo 2π); exact angles, and exact angles a log writer rounded to
     7 decimals (2π/1e-7 ≈ 6.3e7 steps per turn, above MAX_DETECTED_COUNTS), are not."""
-    from ropod_sysid.noise import MAX_DETECTED_COUNTS, detect_encoder_counts
+    from ropod_sysid.quantisation import MAX_DETECTED_COUNTS, detect_encoder_counts
 
     t = np.linspace(0.0, 10.0, 2001)[:, None]
     # a wheel, a wrapped angle, and one turning so slowly that rounding moves it by single steps
@@ -260,7 +260,8 @@ def test_the_planned_runs_encoder_errors_are_the_fits_on_the_same_rows(steered_s
     0.12, 0.26; with the sawtooth share 0.12, 0.24; the old chain the same), not asserted: a
     cause not found, and a small share of σ̂² (those rows' variance is 30–60× smaller than
     the base rows')."""
-    from ropod_sysid.noise import fit_error_gram, window_motion
+    from ropod_sysid.noise import fit_error_gram
+    from ropod_sysid.quantisation import window_motion
     from ropod_sysid.trajectory.identifiability import _regressor_rows
 
     pf, truth, model, _, _, pre, a_e, a_q = steered_swivel_rows

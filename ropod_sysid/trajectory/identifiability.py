@@ -64,9 +64,10 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
     (3, p, p), both from the errors carried through the fit's own recipe
     (:func:`~ropod_sysid.noise.recipe_error_gram`, the one ``fit --encoder-counts``
     subtracts; :func:`~ropod_sysid.noise.kind_grams`). ``motion``: each channel's rate and
-    acceleration through the rows' windows ((M, J) each; :func:`~ropod_sysid.noise.window_motion`
-    of a log), whose :func:`~ropod_sysid.noise.tone_share` the encoders' errors then take, as
-    the fit's do (None: the :func:`~ropod_sysid.noise.sawtooth_share` of the rows' rates)."""
+    acceleration through the rows' windows ((M, J) each;
+    :func:`~ropod_sysid.quantisation.window_motion` of a log), whose
+    :func:`~ropod_sysid.quantisation.tone_share` the encoders' errors then take, as the fit's
+    do (None: the :func:`~ropod_sysid.quantisation.sawtooth_share` of the rows' rates)."""
     from ropod_sysid.noise import kind_grams, planned_rows, recipe_error_gram, row_variances
 
     out, var = [], []
