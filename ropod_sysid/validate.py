@@ -161,17 +161,20 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
 
         n_steps = (t.size - 1) * n_sub
         n_act = tau.shape[1]
-        x = np.concatenate([q0, qd0[:3], angles0]).astype(float)[None]
+        x = np.concatenate([q0, qd0, angles0]).astype(float)[None]
         given = np.zeros((n_steps + 1, 1, n_act))
         given[:-1, 0] = held.reshape(-1, n_act)
-        rec = (np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)),
+        rec = (np.empty((t.size, 1, 3)), np.empty((t.size, 1, qd0.size)),
+               np.empty((t.size, 1, 3)),
                np.empty((t.size, 1, angles0.size)), np.empty((t.size, 1, n_act)),
                np.zeros((t.size, 1, 3)), np.empty((t.size, 1)), np.zeros((t.size, 1, n_act)))
-        with simulate_jit.first_compile():
-            simulate_jit.run(groups, simulate_jit.base_parameters(model, params, friction),
-                             np.array([0.0, 0.0, 0.0, dts[0] / n_sub, 1.0]), n_sub, 0,
+        cons = simulate_jit.constraint_scratch(groups)
+        with simulate_jit.first_compile(cons):
+            simulate_jit.run(groups, cons, simulate_jit.base_parameters(model, params, friction),
+                             np.array([dts[0] / n_sub, 1.0]), np.zeros((4, n_act)), n_sub, 0,
                              n_steps, np.array([n_steps]), np.zeros((1, 1, 3)),
-                             np.zeros((1, 1, 3)), False, x, np.zeros((1, n_act)), *rec, given)
+                             np.zeros((1, 1, 0)), np.zeros((1, 1, 3)), False, x,
+                             np.zeros((1, n_act)), *rec, given)
         return rec[0][:, 0], rec[1][:, 0], rec[3][:, 0]
     y = (q0[None].astype(float), qd0[None].astype(float), angles0[None].astype(float))
     out = [y]
