@@ -22,11 +22,20 @@ round-off, ``tests/test_simulate_jit.py``).
 
 :func:`run` alone is called from Python and cached on disk (``cache=True``): the first call in
 a fresh environment compiles (about 11 s, numba's typing and lowering more than LLVM), later
-processes load the cache (about 1 s). The functions it calls are compiled into it: they have no
-Python wrapper and no cache of their own (``no_cpython_wrapper=True``; each wrapper and cache
-cost the first compile a fraction of a second), and the kind dispatchers (``_unit_*``) are
-inlined into their callers (``inline="always"``), so no separately optimised library sits
-between the loop and the kernels. Arrays are copied element by element, not by slice
+processes load the cache (about 1 s). Platforms with constraint rows pass their scratch
+(``cons``, :func:`constraint_scratch`), the others None, and numba prunes every branch under
+``cons is None`` to the one it takes: the loop without constraint rows compiles neither the
+steered kernel nor the constrained solve, and platforms with steered units compile a second
+specialization of run on their first call (about 18 s; 1 s to load). The functions it calls are
+compiled into it: they have no Python wrapper and no cache of their own
+(``no_cpython_wrapper=True``; each wrapper and cache cost the first compile a fraction of a
+second); the kind dispatchers (``_unit_*``) and the functions run calls from one place
+(:func:`_eom`, :func:`_control`, :func:`_accel` with :func:`_constrained`, :func:`_rates`,
+:func:`_energy`) are inlined into their callers (``inline="always"``), so no separately
+optimised library sits between the loop and the kernels (each library is optimised again with
+all it links in: inlining them cut the steered specialization's compile from 23.0 to 18.5 s of
+CPU, one measurement each); the kernels themselves are not (inlined too, they cost the ropod's
+compile 5–11 s more in two measurements). Arrays are copied element by element, not by slice
 assignment, which would compile numba's shape-mismatch message (3 s of string formatting).
 numba checks a cached function only against its own source file, not those of the functions
 it calls, so :func:`run`'s cache is flushed when a kernel module's source changes
@@ -243,14 +252,13 @@ def _eigh(a: np.ndarray, vec: np.ndarray, lam: np.ndarray, n: int) -> None:
 
 
 @njit(no_cpython_wrapper=True, error_model="numpy")
-def _gram(g: np.ndarray, h: np.ndarray, by_row: bool, n: int, s: np.ndarray) -> None:
-    """The lower triangle of G H over G's first n rows into ``s``: H = ``h`` (D, C), or its
-    transpose when ``by_row`` (``h`` (C, D): G Gᵀ for h = G)."""
+def _gram(g: np.ndarray, h: np.ndarray, n: int, s: np.ndarray) -> None:
+    """The lower triangle of G H (H = ``h`` (D, C)) over G's first n rows into ``s``."""
     for i in range(n):
         for j in range(i + 1):
             acc = 0.0
             for d in range(g.shape[1]):
-                acc += g[i, d] * (h[j, d] if by_row else h[d, j])
+                acc += g[i, d] * h[d, j]
             s[i, j] = acc
 
 
@@ -271,7 +279,10 @@ def _constrained(cons: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, piv:
     n = n_con
     if n_con > rank[0]:  # U_rᵀ G and U_rᵀ Ġ q̇ in G's first r rows, U_r from G Gᵀ
         n = rank[0]
-        _gram(g, g, True, n_con, s)
+        for j in range(n_con):
+            for d in range(n_dof):
+                mg[d, j] = g[j, d]
+        _gram(g, mg, n_con, s)  # G Gᵀ
         _eigh(s, vec, lam, n_con)
         for t in range(n):  # the largest eigenvalues, one at a time
             top = 0
@@ -302,7 +313,7 @@ def _constrained(cons: tuple, bp: np.ndarray, x: np.ndarray, m: np.ndarray, piv:
             mg[d, j] = v[d]
             acc += g[j, d] * (bp[10] * x[3 + d] + qdd[d])
         col[j] = -gdot[j] - acc
-    _gram(g, mg, False, n, s)  # S = G M⁻¹ Gᵀ
+    _gram(g, mg, n, s)  # S = G M⁻¹ Gᵀ
     _eigh(s, vec, lam, n)
     top = lam[0]
     for j in range(1, n):
