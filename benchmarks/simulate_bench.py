@@ -12,7 +12,12 @@ path, as ratios to real time and to the numpy baseline measured in the same run.
 - the compiled loop: 10 s and 60 s ropod runs (the typical run of Sec. VI-A and its four
   variants), one run and four batched; the 5DPO likewise (10 s);
 - equality: the largest difference of every SimResult array between the two paths over the
-  four 10 s ropod runs, relative to the array's largest value.
+  four 10 s ropod runs, relative to the array's largest value;
+- steered wheels (the shipped sample's platform, ``datasets/steered``: 001's two-wheeled
+  vehicle, its truth and controller): one 5 s typical run and its four variants, numpy and
+  compiled in the same run (the faster of two each) and their largest difference; and the
+  first call of the loop's specialization for platforms with constraint rows on an empty
+  cache and on its cache (as for the ropod).
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 OMNI = HERE.parent / "datasets" / "omni" / "platform.yaml"
+STEERED = HERE.parent / "datasets" / "steered"
 OFF_SQUARE = [[0.23, 0.20], [-0.19, 0.22], [-0.21, -0.18], [0.20, -0.23]]
 FIELDS = ("q", "qd", "qdd", "angles", "tau", "energy")
 
@@ -50,6 +56,15 @@ t2 = time.perf_counter()
 simulate(pf, p, sp, engine="numba")
 print(t1 - t0, t2 - t1, time.perf_counter() - t2)
 """
+# the same for the loop's specialization with constraint rows (the steered sample's platform)
+FIRST_CALLS_STEERED = FIRST_CALLS.replace(
+    "pf = ropod_platform()\np = thesis_fixed_masses(pf.unit_names)",
+    f"from ropod_sysid.platform import load_platform\nfrom ropod_sysid.params import Parameters"
+    f"\nimport json\npf = load_platform({str(STEERED / 'platform.yaml')!r})\n"
+    f"p = Parameters(json.load(open({str(STEERED / 'truth.json')!r})))")
+# the shipped steered sample's controller (datasets/steered/make_dataset.py)
+STEER_CONTROL = dict(kp=20.0, ki=200.0, torque_limit=25.6, steer_kp=40.0, steer_ki=800.0,
+                     steer_torque_limit=129.0)
 
 
 def runs(duration: float, **kwargs: Any) -> list:
@@ -71,13 +86,13 @@ def timed(f: Any, *args: Any, **kwargs: Any) -> tuple[float, Any]:
     return time.perf_counter() - t0, out
 
 
-def first_calls() -> dict[str, float]:
+def first_calls(script: str = FIRST_CALLS) -> dict[str, float]:
     """Compile time (empty cache) and cache-load time of the first call in a process."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         out = {}
         for key in ("cold", "warm"):
-            r = subprocess.run([sys.executable, "-c", FIRST_CALLS], env=env, check=True,
+            r = subprocess.run([sys.executable, "-c", script], env=env, check=True,
                                capture_output=True, text=True)
             imports, first, again = map(float, r.stdout.split())
             out[f"{key}_imports_s"] = imports
@@ -162,11 +177,58 @@ def simulate_figures(ropod_sysid: list[str], workdir: Path, quick: bool = False
     res["equality_10s"] = {"numpy_four_s": t_ref, "max_rel_diff": diff}
     rows.append(("compiled vs numpy, four 10 s ropod runs", f"max rel. diff {diff:.1e}",
                  f"numpy {t_ref:.1f} s", "≤ 1e-9"))
+    res["steered"], steered_rows = steered_figures(quick)
+    rows.extend(steered_rows)
     fc, cli = res["first_calls"], res["cli_2s"]
     rows.append(("first call: compile (empty cache) / cache load",
                  f"{fc['cold_extra_s']:.1f} s / {fc['warm_extra_s']:.2f} s",
                  f"imports {fc['warm_imports_s']:.2f} s", "(once per install)"))
+    sc = res["steered"]["first_calls"]
+    rows.append(("first call, steered specialization: compile / cache load",
+                 f"{sc['cold_extra_s']:.1f} s / {sc['warm_extra_s']:.2f} s",
+                 f"imports {sc['warm_imports_s']:.2f} s", "(once per install)"))
     rows.append(("CLI simulate 2 s at 200 Hz: numba / numpy", f"{cli['numba']:.2f} s / "
                  f"{cli['numpy']:.2f} s", f"{cli['numpy'] / cli['numba']:.1f}× faster",
                  "not slower"))
+    return res, rows
+
+
+def steered_figures(quick: bool = False) -> tuple[dict[str, Any], list[tuple[str, str, str, str]]]:
+    """The shipped steered sample's platform (two centred steered wheels, 001): a 5 s typical
+    run and its four variants with numpy and compiled, measured in the same run (the faster of
+    two), their largest difference, and the first calls of the loop's specialization for
+    platforms with constraint rows."""
+    from ropod_sysid.params import Parameters
+    from ropod_sysid.platform import load_platform
+    from ropod_sysid.simulate import Controller, simulate
+    from ropod_sysid.trajectory import typical, variants
+
+    pf = load_platform(STEERED / "platform.yaml")
+    truth = Parameters(json.loads((STEERED / "truth.json").read_text()))
+    span = 5.0
+    sps = [v.to_setpoints() for v in variants(typical(
+        duration=span, v_max=0.4, w_max=1.0, pivot_rate_max=None, platform=pf,
+        seed=0)).values()]
+    ctrl = Controller(**STEER_CONTROL)
+    res: dict[str, Any] = {"first_calls": first_calls(FIRST_CALLS_STEERED)}
+    simulate(pf, truth, sps[0], controller=ctrl, engine="numba")  # the cache loaded
+    times: dict[str, float] = {}
+    out: dict[str, list] = {}
+    for _ in range(1 if quick else 2):  # interleaved: numpy, compiled, numpy, compiled
+        for engine in ("numpy", "numba"):
+            for label, batch in (("one", sps[:1]), ("four", sps)):
+                wall, out[f"{engine}_{label}"] = timed(simulate, pf, truth, batch,
+                                                       controller=ctrl, engine=engine)
+                key = f"{engine}_{label}_s"
+                times[key] = min(times.get(key, np.inf), wall)
+    res |= times
+    res["max_rel_diff"] = max_rel_diff(out["numba_four"], out["numpy_four"])
+    n1, n4 = times["numpy_one_s"], times["numpy_four_s"]
+    c1, c4 = times["numba_one_s"], times["numba_four_s"]
+    rows = [(f"simulate steered sample {span:g} s: numpy / compiled, one run",
+             f"{n1:.2f} s / {c1:.3f} s", f"{n1 / c1:.0f}× faster; {span / c1:.0f}× real time",
+             "—"),
+            (f"simulate steered sample {span:g} s: numpy / compiled, four runs",
+             f"{n4:.2f} s / {c4:.3f} s",
+             f"{n4 / c4:.0f}× faster; max rel. diff {res['max_rel_diff']:.1e}", "≤ 1e-9")]
     return res, rows

@@ -298,20 +298,24 @@ def simulate(platform: Platform, params: DynamicParameters,
 
     n_keep = np.floor(durations * rate + 1e-9).astype(np.int64) + 1  # log samples per run
     records = (rec_q, rec_qd, rec_qdd, rec_ang, rec_tau, rec_fb, rec_e, rec_tau_sum)
+    # planned angles of position-controlled joints (steering), on the step grid
+    planned = np.stack([r.planned_at(grid[:, k], columns) for k, r in enumerate(runs)])
+    plans = model.plans(grid[:, 0] - t0[0], np.swapaxes(sp_all, 0, 1), planned)
     with Progress(steps, "simulate", quiet=quiet) as bar:
         if groups is not None:
             from ropod_sysid import simulate_jit
 
+            # the loops' gains per actuator: PD on the angle where it has an angle error
+            _, angle_err = model.setpoints(q, sp_all[0], sp_rate[0], angles, plans, 0)
+            position = ~np.isnan(angle_err[0])
             simulate_jit.integrate(
                 groups, simulate_jit.base_parameters(model, params, friction),
-                np.array([controller.kp, controller.ki, controller.torque_limit, dt]), stride,
-                steps, np.minimum((n_keep - 1) * stride, steps), sp_all, f_all, ang0, n_act,
-                records, bar)
+                np.array([dt, 0.0]), np.stack([*controller.gains(position), position]),
+                stride, steps, np.minimum((n_keep - 1) * stride, steps), sp_all,
+                simulate_jit.planned(plans, steps + 1, n_runs), f_all, ang0, n_act, records,
+                bar)
         else:
             kp, ki, limit = None, None, None
-            # planned angles of position-controlled joints (steering), on the step grid
-            planned = np.stack([r.planned_at(grid[:, k], columns) for k, r in enumerate(runs)])
-            plans = model.plans(grid[:, 0] - t0[0], np.swapaxes(sp_all, 0, 1), planned)
             law, desired = None, None
             if control is not None:
                 _, angle_err = model.setpoints(q, sp_all[0], sp_rate[0], angles, plans, 0)

@@ -109,10 +109,13 @@ def validate_logs(logs: Sequence[Log], platform: Platform, params: DynamicParame
 # (10 ms: 0.004) at a fifth of the time; RK4 stays stable while a pivot's relaxation rate
 # v / s_w stays under 2.8 / step (5.5 m/s at s_w = 1 cm)
 FREE_RUN_STEP = 5e-3
-# where a unit type has no compiled kernel (steered units) the numpy path takes each step in
-# Python (about 1.7 ms a step for two steered wheels): it steps at most 2 ms (the steered
-# sample's fit % then within 1e-5 of 1 ms steps; 5 ms lose 1–2 points), and the report's free
-# run covers the first log's first FREE_RUN_NUMPY_S
+# platforms with constraint rows (steered wheels) step at most 2 ms, compiled or not: on the
+# steered sample (true parameters, its first two logs) the fit % of v_x and ω is then within
+# 0.001 points of 1 ms steps', 5 ms lose up to 0.8 points over a log's first 5 s (0.08 over 30 s)
+FREE_RUN_CONSTRAINED_STEP = 2e-3
+# where a unit type has no compiled kernel (wheels on legs) the numpy path takes each step in
+# Python: it steps at most 2 ms, and the report's free run covers the first log's first
+# FREE_RUN_NUMPY_S
 FREE_RUN_NUMPY_STEP = 2e-3
 FREE_RUN_NUMPY_S = 5.0
 # ... for platforms of up to this many unit groups; each group costs its Python overhead per
@@ -139,7 +142,8 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     over each integration step at its middle. RK4 (eq. 33; with constraints their projection
     and Baumgarte's term, as the simulator) in steps of at most ``max_step`` (default
     :data:`FREE_RUN_STEP` compiled — the simulator's loop :func:`ropod_sysid.simulate_jit.run`
-    with given torques, where every unit type has a kernel and t is uniform — and
+    with given torques, where every unit type has a kernel and t is uniform —,
+    :data:`FREE_RUN_CONSTRAINED_STEP` compiled with constraint rows and
     :data:`FREE_RUN_NUMPY_STEP` on the numpy path)."""
     from ropod_sysid.simulate import derivatives, rk4_step
 
@@ -147,7 +151,10 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     friction = friction_of(params)
     dts = np.diff(t)
     groups = _compiled_groups(model, params, t)
-    step = max_step or (FREE_RUN_STEP if groups is not None else FREE_RUN_NUMPY_STEP)
+    if groups is None:
+        step = max_step or FREE_RUN_NUMPY_STEP
+    else:
+        step = max_step or (FREE_RUN_STEP if groups[9][1] == 0 else FREE_RUN_CONSTRAINED_STEP)
     n_sub = max(1, int(np.ceil(float(np.max(dts, initial=0.0)) / step - 1e-9)))
     # each step holds the torques interpolated at its middle (zero-order hold, as the drives)
     frac = (np.arange(n_sub) + 0.5) / n_sub
@@ -161,17 +168,20 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
 
         n_steps = (t.size - 1) * n_sub
         n_act = tau.shape[1]
-        x = np.concatenate([q0, qd0[:3], angles0]).astype(float)[None]
+        x = np.concatenate([q0, qd0, angles0]).astype(float)[None]
         given = np.zeros((n_steps + 1, 1, n_act))
         given[:-1, 0] = held.reshape(-1, n_act)
-        rec = (np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)), np.empty((t.size, 1, 3)),
+        rec = (np.empty((t.size, 1, 3)), np.empty((t.size, 1, qd0.size)),
+               np.empty((t.size, 1, 3)),
                np.empty((t.size, 1, angles0.size)), np.empty((t.size, 1, n_act)),
                np.zeros((t.size, 1, 3)), np.empty((t.size, 1)), np.zeros((t.size, 1, n_act)))
-        with simulate_jit.first_compile():
-            simulate_jit.run(groups, simulate_jit.base_parameters(model, params, friction),
-                             np.array([0.0, 0.0, 0.0, dts[0] / n_sub, 1.0]), n_sub, 0,
+        cons = simulate_jit.constraint_scratch(groups)
+        with simulate_jit.first_compile(cons):
+            simulate_jit.run(groups, cons, simulate_jit.base_parameters(model, params, friction),
+                             np.array([dts[0] / n_sub, 1.0]), np.zeros((4, n_act)), n_sub, 0,
                              n_steps, np.array([n_steps]), np.zeros((1, 1, 3)),
-                             np.zeros((1, 1, 3)), False, x, np.zeros((1, n_act)), *rec, given)
+                             np.zeros((1, 1, 0)), np.zeros((1, 1, 3)), False, x,
+                             np.zeros((1, n_act)), *rec, given)
         return rec[0][:, 0], rec[1][:, 0], rec[3][:, 0]
     y = (q0[None].astype(float), qd0[None].astype(float), angles0[None].astype(float))
     out = [y]

@@ -33,16 +33,19 @@ from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
 
 DATASETS = Path(__file__).resolve().parent.parent / "datasets"
 
-# the first call of the compiled simulator's loop: compiles it on an empty numba cache
+# the first calls of the compiled simulator's loop: compile it on an empty numba cache, without
+# constraint rows (the ropod) and with (steered wheels: a specialization of its own)
 WARM_UP = """
 import numpy as np
-from ropod_sysid.params import thesis_fixed_masses
-from ropod_sysid.platform import ropod_platform
+from ropod_sysid.params import thesis_fixed_masses, typical_parameters
+from ropod_sysid.platform import load_platform, ropod_platform
 from ropod_sysid.simulate import Setpoints, simulate
 pf = ropod_platform()
 t = np.array([0.0, 0.05])
-simulate(pf, thesis_fixed_masses(pf.unit_names), Setpoints(t, 0.1 + 0 * t, 0 * t, 0 * t),
-         engine="numba")
+sp = Setpoints(t, 0.1 + 0 * t, 0 * t, 0 * t)
+simulate(pf, thesis_fixed_masses(pf.unit_names), sp, engine="numba")
+pf = load_platform("datasets/steered/platform.yaml")
+simulate(pf, typical_parameters(pf, 93.0, 4.51), sp, engine="numba")
 """
 _WARM_UP = pytest.StashKey[subprocess.Popen]()  # the process running WARM_UP
 
@@ -53,9 +56,10 @@ _CONFIG: pytest.Config | None = None
 def pytest_configure(config: pytest.Config) -> None:
     """With test workers, the controller (idle while they test) starts a process that compiles
     the simulator's loop at once: on a clean clone (no numba cache yet) the workers would each
-    compile it, at the same time, about 11 s each. A worker that needs the loop before the cache
-    is written waits for it (:func:`ropod_sysid.simulate_jit.first_compile`), then loads it;
-    until then the workers collect and run other tests. On a warm cache it only loads it."""
+    compile it, at the same time, about 11 s each (and its specialization for steered wheels,
+    with constraint rows, after it). A worker that needs the loop before the cache is written
+    waits for it (:func:`ropod_sysid.simulate_jit.first_compile`), then loads it; until then
+    the workers collect and run other tests. On a warm cache it only loads it."""
     global _CONFIG
     _CONFIG = config
     if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", 0):

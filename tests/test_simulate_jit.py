@@ -1,7 +1,9 @@
 """The compiled simulator (numba) against the numpy path, the reference: the same runs to
-round-off on the ropod, the 5DPO and a platform mixing smart wheels and omni wheels, with
-friction (per wheel, shared, body axes), sensor effects and an external force; and the numpy
-fallback when numba or a kernel is missing."""
+round-off on the ropod, the 5DPO, a platform mixing smart wheels and omni wheels, and the
+steered wheels of 001 (two, four over-constrained ones, and mixed with swivel or omni wheels;
+their steering loops and constraint rows), with friction (per wheel, shared, body axes), sensor
+effects and an external force; free runs of a steered platform; and the numpy fallback when
+numba or a kernel is missing."""
 
 from __future__ import annotations
 
@@ -13,9 +15,10 @@ import pytest
 
 import ropod_sysid
 from ropod_sysid.errors import InputError
+from ropod_sysid.model import PlatformModel
 from ropod_sysid.model.units.omni import OmniUnits
 from ropod_sysid.params import Parameters, thesis_fixed_masses, typical_parameters
-from ropod_sysid.platform import load_platform
+from ropod_sysid.platform import load_platform, platform_from_dict
 from ropod_sysid.simulate import (
     MIN_COMPILED_STEPS,
     Controller,
@@ -25,11 +28,13 @@ from ropod_sysid.simulate import (
     simulate,
 )
 
-from .conftest import four_variants, smooth_setpoints
+from .conftest import DATASETS, four_variants, smooth_setpoints
 from .test_omni import PLATFORM as OMNI_PLATFORM
+from .test_steered import ENTRY, FOUR, MIXED
 from .test_units_pipeline import OMNI_CONTROL, PAPER_BODY, mixed_platform
 
 FIELDS = ("q", "qd", "qdd", "angles", "tau", "f_b", "energy", "tau_mean")
+STEER_CONTROL = Controller(kp=20.0, ki=200.0, torque_limit=25.6)  # 001's drives (datasets/steered)
 PUSH = ForceSchedule(np.array([0.0, 0.4, 0.5, 0.9]),
                      np.array([[0.0, 0.0, 0.0], [12.0, -8.0, 2.0], [12.0, -8.0, 2.0],
                                [0.0, 0.0, 0.0]]))
@@ -120,11 +125,113 @@ def test_mixed_platform_with_shared_friction() -> None:
     assert_same_runs(fast, ref)
 
 
+def steered_truth(pf: object) -> Parameters:
+    """001's vehicle (Table 1: m_C, Θ_C; its units' values and friction ±10 % per unit)."""
+    return typical_parameters(pf, 93.0, 4.51)
+
+
+def steering(pf: object, res: object) -> np.ndarray:
+    """The steering angles (N, E) of a run."""
+    return res.angles[:, PlatformModel(pf).coordinate_channels]
+
+
+def test_steered_runs_of_two_lengths_with_force_and_sensors() -> None:
+    """001's two-wheeled vehicle: two runs of different length batched (the steering loops
+    track the planned steering through the starts and stops), pushed by an external force,
+    recorded with quantised encoders, current noise, jitter and interval-mean currents (2 ms
+    steps: the numpy path takes about 3 ms a step for these units)."""
+    pf = platform_from_dict(ENTRY, "<test>")
+    runs = [smooth_setpoints(0.5, 1, 1, ramp=0.2, rest=0.1),
+            smooth_setpoints(0.4, -1, -1, ramp=0.2, rest=0.1)]
+    sensors = Sensors(encoder_counts=2**14, current_noise=0.03, jitter=2e-4, seed=3,
+                      current_average=True)
+    fast, ref = both(pf, steered_truth(pf), runs, rate=250.0, dt=2e-3, force=PUSH,
+                     sensors=sensors, controller=STEER_CONTROL)
+    assert [len(r.log.t) for r in fast] == [126, 101]
+    assert np.abs(fast[0].qd[:, :2]).max() > 0.05  # it moved
+    assert np.ptp(steering(pf, fast[0]), axis=0).min() > 0.02  # and steered
+    assert np.abs(fast[0].tau).max() > 1.0
+    assert_same_runs(fast, ref)
+
+
+def test_four_steered_wheels_with_body_friction() -> None:
+    """Four steered wheels at a rectangle's corners: more constraint rows than their
+    consistent rank (taken at rank 2), with body-axis friction (the drives then have none,
+    the steering keeps its own)."""
+    pf = platform_from_dict(FOUR, "<test>")
+    values = {n: v for n, v in steered_truth(pf).items() if n[:3] not in ("fdv", "fdc")}
+    truth = Parameters(values | {n: 10 * v for n, v in PAPER_BODY.items()})
+    fast, ref = both(pf, truth, brisk(0.5)[2:3], rate=500.0, dt=2e-3, controller=STEER_CONTROL)
+    assert np.abs(fast[0].qd[:, :2]).max() > 0.05
+    assert_same_runs(fast, ref)
+
+
+def test_steered_wheels_mixed_with_swivel_casters() -> None:
+    """The shipped mixed platform (datasets/steered-swivel): two steered wheels and two swivel
+    casters, whose pivots turn freely beside the steering motors."""
+    pf = load_platform(DATASETS / "steered-swivel" / "platform.yaml")
+    truth = Parameters(json.loads((DATASETS / "steered-swivel" / "truth.json").read_text()))
+    run = smooth_setpoints(0.4, 1, -1, ramp=0.15, rest=0.05)
+    fast, ref = both(pf, truth, run, rate=250.0, dt=2e-3, controller=STEER_CONTROL,
+                     sensors=Sensors(current_noise=0.01, seed=2))
+    assert np.abs(fast[0].qd[:, :2]).max() > 0.02
+    assert_same_runs(fast, ref)
+
+
+def test_steered_wheel_between_omni_wheels_with_shared_friction() -> None:
+    """A steered wheel whose group comes after an omni group (its coordinate, constraint row
+    and plan at their offsets; its channels between the omni wheels'), friction by shared
+    coefficients."""
+    entry = dict(MIXED, units=[MIXED["units"][1], MIXED["units"][0], MIXED["units"][2]])
+    pf = platform_from_dict(entry, "<test>")
+    truth = Parameters({"m_b": 30.0, "Jzz_b": 2.0, "Jst": 0.2, "Jrot_s": 0.02,
+                        "Jrot_o": 0.004, "fdv": -0.3, "fdc": -0.8, "fsv": -2.0, "fsc": -2.1,
+                        "fov": -0.01, "foc": -0.05})
+    assert [g.type.type_name for g in pf.groups] == ["omni", "steered"]
+    fast, ref = both(pf, truth, brisk(0.5)[3:], rate=250.0, dt=2e-3,
+                     controller=STEER_CONTROL, force=PUSH)
+    assert np.abs(fast[0].q[:, :2]).max() > 1e-3
+    assert_same_runs(fast, ref)
+
+
+def test_steered_free_run(monkeypatch) -> None:
+    """A free run under given torques (:func:`ropod_sysid.validate.free_run`) of four steered
+    wheels from a moving state: compiled and numpy the same to round-off, the generalized
+    velocity with the steering rates (D columns) on both."""
+    from ropod_sysid import simulate_jit
+    from ropod_sysid.validate import free_run
+
+    pf = platform_from_dict(FOUR, "<test>")
+    truth = steered_truth(pf)
+    (res,) = simulate(pf, truth, brisk(0.6)[:1], rate=100.0, controller=STEER_CONTROL,
+                      engine="numba")
+    model = PlatformModel(pf)
+    k = 30  # from the middle of the run, 0.15 s
+    rates = np.gradient(steering(pf, res), res.log.t, axis=0)
+    args = (res.log.t[k:46], res.q[k], np.concatenate([res.qd[k], rates[k]]), res.angles[k],
+            res.tau[k:46])
+    compiled = free_run(model, truth, *args, max_step=1e-3)
+    monkeypatch.setattr(simulate_jit, "groups_of", lambda *a: None)
+    plain = free_run(model, truth, *args, max_step=1e-3)
+    assert compiled[1].shape == (16, 7)
+    for c, n in zip(compiled, plain, strict=True):
+        assert c.shape == n.shape
+        assert np.abs(c - n).max() <= 1e-10 * np.abs(n).max()
+
+
 def test_numpy_fallback_without_a_kernel(monkeypatch, off_square) -> None:
-    """A unit type without ``compiled`` is simulated by the numpy path under ``auto``; asking
-    for the compiled loop names the platform's types."""
+    """A unit type without ``compiled``, or whose ``compiled`` declines the parameters
+    (returns None), is simulated by the numpy path under ``auto``; asking for the compiled
+    loop names the platform's types."""
+    from ropod_sysid import simulate_jit
+
     pf = mixed_platform()
     truth = Parameters(dict(typical_parameters(pf, 30.0, 3.0)) | {"Jrot_o": 0.004})
+    model = PlatformModel(pf)
+    assert simulate_jit.groups_of(model, truth, "per-wheel") is not None
+    with monkeypatch.context() as m:
+        m.setattr(OmniUnits, "compiled", lambda self, params, variant="per-wheel": None)
+        assert simulate_jit.groups_of(model, truth, "per-wheel") is None
     monkeypatch.setattr(ropod_sysid.simulate, "MIN_COMPILED_STEPS", 100)
     runs = brisk(0.25)[:1]  # 250 steps: long enough for the compiled loop (at this threshold)
     ref = simulate(pf, truth, runs, engine="numpy")

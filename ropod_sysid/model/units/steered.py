@@ -561,6 +561,15 @@ class SteeredUnits:
             return out
         return cols
 
+    def compiled(self, params: Mapping[str, float], variant: FrictionVariant = "per-wheel"
+                 ) -> tuple[Any, np.ndarray, np.ndarray]:
+        """The compiled one-sample kernel (:mod:`ropod_sysid.model.units.steered_jit`: S1–S8,
+        the steering loops along the planned steering) and its geometry and parameter arrays
+        (ImportError without numba)."""
+        from ropod_sysid.model.units import steered_jit
+
+        return steered_jit, *steered_jit.arrays(self, params, variant)
+
     def kinetic_energy(self, data: SteeredData, params: Mapping[str, float]) -> np.ndarray:
         """Σ_i ½ J_st (θ̇ + β̇_i)² + ½ J_rot,s φ̇_i² [J]; shape (N,)."""
         turn = data.qd[:, 2:3] + data.steer_rate
