@@ -34,56 +34,48 @@ from ropod_sysid.simulate import Setpoints, SimResult, record, simulate
 DATASETS = Path(__file__).resolve().parent.parent / "datasets"
 
 # the first calls of the compiled simulator's loop: compile it on an empty numba cache, without
-# constraint rows (the ropod) and with (steered wheels: a specialization of its own), each in a
-# process of its own (WARM_UPS)
+# constraint rows (the ropod) and with (steered wheels: a specialization of its own)
 WARM_UP = """
-import sys
 import numpy as np
 from ropod_sysid.params import thesis_fixed_masses, typical_parameters
 from ropod_sysid.platform import load_platform, ropod_platform
 from ropod_sysid.simulate import Setpoints, simulate
+pf = ropod_platform()
 t = np.array([0.0, 0.05])
 sp = Setpoints(t, 0.1 + 0 * t, 0 * t, 0 * t)
-if sys.argv[1] == "plain":
-    pf = ropod_platform()
-    simulate(pf, thesis_fixed_masses(pf.unit_names), sp, engine="numba")
-else:
-    pf = load_platform("datasets/steered/platform.yaml")
-    simulate(pf, typical_parameters(pf, 93.0, 4.51), sp, engine="numba")
+simulate(pf, thesis_fixed_masses(pf.unit_names), sp, engine="numba")
+pf = load_platform("datasets/steered/platform.yaml")
+simulate(pf, typical_parameters(pf, 93.0, 4.51), sp, engine="numba")
 """
-WARM_UPS = ("plain", "steered")
-_WARM_UP = pytest.StashKey[list[subprocess.Popen]]()  # the processes running WARM_UP
+_WARM_UP = pytest.StashKey[subprocess.Popen]()  # the process running WARM_UP
 
 
 _CONFIG: pytest.Config | None = None
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """With test workers, the controller (idle while they test) starts two processes that
-    compile the simulator's loop at once, one each specialization: on a clean clone (no numba
-    cache yet) the workers would each compile it, at the same time, about 11 s each (and its
-    specialization for steered wheels, with constraint rows, 15–21 s). A worker that needs the
-    loop before the cache is written waits for it
-    (:func:`ropod_sysid.simulate_jit.first_compile`), then loads it; until then the workers
-    collect and run other tests. The two compile side by side: the first tests wait for the
-    plain loop, so the steered one takes the core they leave. On a warm cache they only load
-    it."""
+    """With test workers, the controller (idle while they test) starts a process that compiles
+    the simulator's loop at once: on a clean clone (no numba cache yet) the workers would each
+    compile it, at the same time, about 11 s each (and its specialization for steered wheels,
+    with constraint rows, after it). A worker that needs the loop before the cache is written
+    waits for it (:func:`ropod_sysid.simulate_jit.first_compile`), then loads it; until then
+    the workers collect and run other tests. On a warm cache it only loads it."""
     global _CONFIG
     _CONFIG = config
     if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", 0):
         return
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    config.stash[_WARM_UP] = [subprocess.Popen(
-        [sys.executable, "-c", WARM_UP, which], cwd=Path(__file__).resolve().parent.parent,
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for which in WARM_UPS]
+    config.stash[_WARM_UP] = subprocess.Popen(
+        [sys.executable, "-c", WARM_UP], cwd=Path(__file__).resolve().parent.parent, env=env,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    """Stop the compiles of :func:`pytest_configure` if the tests ended before them."""
-    for proc in config.stash.get(_WARM_UP, []):
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    """Stop the compile of :func:`pytest_configure` if the tests ended before it."""
+    proc = config.stash.get(_WARM_UP, None)
+    if proc is not None and proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 # Test files in the order the workers take them: longest first (the files' seconds in
