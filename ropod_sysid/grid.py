@@ -2,7 +2,7 @@
 
 Chunk by chunk, the wrapped unit angles (pivots; and a tracker heading) are unwrapped, continued
 across chunks (bit-identical to one :func:`numpy.unwrap`); the sample time is taken from the
-head of the log (:func:`ropod_sysid.regressor.grid_step`). A log whose steps all stay on it is
+head of the log (:func:`ropod_sysid.io.timebase.grid_step`). A log whose steps all stay on it is
 passed on as sampled; a jittered one is put on the uniform grid ``t0 + k dt`` by linear
 interpolation continued across chunks — the grid of the in-memory path. A step off the grid
 found after the head raises :class:`_OffGrid`, on which the pass restarts in resampling mode.
@@ -18,8 +18,8 @@ import numpy as np
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
+from ropod_sysid.io.timebase import GRID_STEPS, grid_jitter, grid_step, jitter_note, on_grid
 from ropod_sysid.odometry import unwrap_from
-from ropod_sysid.regressor import GRID_STEPS, grid_jitter, grid_step, jitter_note, on_grid
 
 
 class _OffGrid(Exception):

@@ -78,7 +78,7 @@ class SensorNoise:
     degree : the fit's smoother (``--smoother``): 2 LOESS and three-point differences, 4 the
         local quartic and five-point differences
     jitter : half-width of a uniform jitter of the sample instants [samples]
-        (:func:`ropod_sysid.regressor.grid_jitter`; for :func:`tone_share`)
+        (:func:`ropod_sysid.io.timebase.grid_jitter`; for :func:`tone_share`)
     """
 
     current_noise: float = 0.03

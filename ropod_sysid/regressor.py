@@ -30,7 +30,15 @@ import numpy as np
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.timebase import HEAD_STEPS, MIN_SAMPLES_PIECE, check_times, split_log
+from ropod_sysid.io.timebase import (
+    MIN_SAMPLES_PIECE,
+    check_times,
+    grid_jitter,
+    grid_step,
+    jitter_note,
+    on_grid,
+    split_log,
+)
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState, odometry_from, unwrap_angles
 from ropod_sysid.params import Friction
@@ -41,8 +49,6 @@ from ropod_sysid.tracker import with_fused_pose
 DEFAULT_SPAN_S = 0.1
 MIN_SPAN_SAMPLES = 5  # the shortest LOESS window of a span given in samples
 QR_LEAF_ROWS = 256  # rows per leaf QR of a block's TSQR (small: fast, cache-resident)
-GRID_STEPS = HEAD_STEPS  # the sample time comes from the first this many steps
-UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
 # a unit's own rows (a steered wheel's steering) are left out while the joint's measured rate is
 # below HELD_RATE / friction_tanh_gain: there the Coulomb term c·tanh(α rate) is steepest and
 # the rate's small errors (encoder counts, the smoother) make its column wrong; on the shipped
@@ -53,53 +59,6 @@ ROWS_PER_SPAN = 10  # default row grid: about this many equation rows per smooth
 REST_SPEED = 0.005  # [m/s] below this base speed, turn rate and every unit angle's rate …
 REST_TURN = 0.005  # [rad/s]
 REST_RATE = 0.05  # [rad/s] … the platform stands still (its rows are left out)
-
-
-def grid_step(t: np.ndarray) -> float:
-    """Sample time [s] of a log, from its first :data:`GRID_STEPS` time steps.
-
-    The least-squares slope of those sample times against their sample numbers, each step
-    counted as its whole number of median steps (so that a dropped sample keeps its place).
-    The slope averages out timestamp jitter that a median step keeps: a 100 Hz log with ±1 ms
-    jitter gets 0.01 s, not 0.009997 s. Only the head of the log is used, so that a streaming
-    pass (:mod:`ropod_sysid.stream`) knows the grid after one chunk and chooses exactly the
-    grid of the in-memory path.
-    """
-    head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
-    steps = np.diff(head)
-    dt0 = float(np.median(steps))
-    if head.size < 3 or not dt0 > 0:
-        return dt0
-    k = np.concatenate([[0.0], np.cumsum(np.maximum(np.round(steps / dt0), 1.0))])
-    k -= k.mean()
-    slope = float(k @ (head - head.mean()) / (k @ k))
-    return slope if slope > 0 else dt0
-
-
-def grid_jitter(t: np.ndarray, dt: float) -> float:
-    """The half-width [samples] of a uniform jitter of a log's sample instants, from its first
-    :data:`GRID_STEPS` sample times (as :func:`grid_step`, so that a streaming pass finds the
-    same): √3 × the standard deviation of their distances from the best straight line through
-    them at the step ``dt``; 0 for a log on its grid (:func:`on_grid`). A jittered instant
-    dithers where the encoders' count grid falls (:func:`ropod_sysid.quantisation.tone_share`)."""
-    head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
-    if head.size < 3 or not dt > 0 or on_grid(np.diff(head), dt):
-        return 0.0
-    k = np.round((head - head[0]) / dt)
-    dev = head - dt * k
-    return float(math.sqrt(3.0) * np.std(dev - dev.mean()) / dt)
-
-
-def on_grid(steps: np.ndarray, dt: float) -> bool:
-    """Whether every time step is within :data:`UNIFORM_RTOL` of the sample time ``dt``."""
-    steps = np.asarray(steps, dtype=float)
-    return bool(steps.size == 0 or np.max(np.abs(steps - dt)) <= UNIFORM_RTOL * dt)
-
-
-def jitter_note(source: str, max_step: float, min_step: float, dt: float) -> str:
-    """The note of a log whose sample times were put on a uniform grid."""
-    return (f"{source}: sample times jitter (max step {max_step:.4g} s, min {min_step:.4g} s); "
-            f"resampled to a uniform {dt:.4g} s grid")
 
 
 class TooShort(InputError):

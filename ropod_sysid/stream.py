@@ -7,7 +7,7 @@ through the steps of :func:`ropod_sysid.regressor.preprocess` and
 :func:`ropod_sysid.regressor.triangles` block by block:
 
 1. pivot angles (and a tracker heading) unwrapped, continued across chunks;
-2. the sample time from the head of the log (:func:`ropod_sysid.regressor.grid_step`); a log
+2. the sample time from the head of the log (:func:`ropod_sysid.io.timebase.grid_step`); a log
    whose steps all stay on it is used as sampled, a jittered one is put on the uniform grid
    ``t0 + k dt`` by linear interpolation continued across chunks — the grid of the in-memory
    path. A step off the grid found after the head restarts the pass in resampling mode;

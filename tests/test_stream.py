@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ropod_sysid import grid, regressor, stream
+from ropod_sysid import grid, stream
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files, fit_logs
+from ropod_sysid.io import timebase
 from ropod_sysid.io.csvlog import iter_csv_log, read_csv_log, write_csv_log
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.regressor import Span, preprocess, triangles
@@ -104,7 +105,7 @@ def test_jittered_log_same_grid(off_square, runs_off_square):
 def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, monkeypatch):
     """Steps off the grid only after the head: the pass restarts in resampling mode and still
     equals the in-memory path."""
-    monkeypatch.setattr(regressor, "GRID_STEPS", 300)
+    monkeypatch.setattr(timebase, "GRID_STEPS", 300)  # (the grid step, grid_step)
     monkeypatch.setattr(grid, "GRID_STEPS", 300)  # (the grid of the pass, ropod_sysid.grid)
     run = runs_off_square[2]
     jit = jittered(off_square, run)
@@ -291,6 +292,6 @@ def test_grid_step_averages_out_jitter_and_keeps_gaps():
     rng = np.random.default_rng(11)
     t = np.arange(6001) * 0.01 + rng.uniform(-1e-3, 1e-3, 6001)
     t = np.delete(t, [50, 51, 52, 3000])
-    assert abs(regressor.grid_step(t) - 0.01) < 2e-8
+    assert abs(timebase.grid_step(t) - 0.01) < 2e-8
     assert abs(float(np.median(np.diff(t))) - 0.01) > 1e-7  # what the median step gives
-    assert regressor.grid_step(np.arange(500) * 0.005) == pytest.approx(0.005, rel=1e-14)
+    assert timebase.grid_step(np.arange(500) * 0.005) == pytest.approx(0.005, rel=1e-14)

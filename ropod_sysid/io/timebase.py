@@ -4,7 +4,7 @@ Over the sample times ``t`` of a log, in this order:
 
 * time strictly increases (a repeated time is named as a duplicated timestamp);
 * the median step of the head (the first :data:`HEAD_STEPS` steps, the steps the grid step
-  comes from, :func:`ropod_sysid.regressor.grid_step`) lies in [:data:`MIN_STEP_S`,
+  comes from, :func:`grid_step`) lies in [:data:`MIN_STEP_S`,
   :data:`MAX_STEP_S`): outside it, ``t`` is not in seconds (milliseconds, most often);
 * no gap: a step longer than :data:`GAP_STEPS` median steps and :data:`GAP_FLOOR_S` would be
   bridged by linear interpolation on the resampling grid — a gap of 10 s in a 100 Hz log
@@ -18,10 +18,16 @@ A chunked reader feeds its chunks in order (:func:`checked_chunks`); the check c
 time of the previous chunk, so a gap or a repeat across a chunk boundary is found, and holds
 the first chunks back until the head is complete, so that nothing is yielded unchecked.
 Messages name the sample by the reader's ``locate`` (file lines, MCAP messages, frames).
+
+The sample grid a fit puts a log on also comes from the head: the sample time
+(:func:`grid_step`, the slope of the head's times), whether every step stays on it
+(:func:`on_grid`; else the log is resampled, :func:`jitter_note`) and the half-width of the
+instants' jitter (:func:`grid_jitter`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Literal
 
@@ -31,6 +37,8 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 
 HEAD_STEPS = 10_000   # the median step (and the grid step) come from the first this many steps
+GRID_STEPS = HEAD_STEPS  # the sample time comes from the first this many steps
+UNIFORM_RTOL = 1e-3  # a log whose every step is this close to it is used as sampled
 GAP_STEPS = 5.0       # a step longer than this many median steps …
 GAP_FLOOR_S = 0.02    # … and longer than this [s] is a gap
 MIN_STEP_S = 1e-4     # median steps below this (above 10 kHz) or …
@@ -240,3 +248,54 @@ def piece_note(name: str, source: str, first: int, samples: int, t0: float, t1: 
     """The note of a piece: which samples of the log it holds."""
     return (f"{name}: samples {first}–{first + samples - 1} of {source} (t {t0:.6g}–{t1:.6g} s), "
             "fitted as a separate log (--split-gaps)")
+
+
+# ---------------------------------------------------------------------------------------------
+# the sample grid of a log (its sample time from the head; jitter)
+
+
+def grid_step(t: np.ndarray) -> float:
+    """Sample time [s] of a log, from its first :data:`GRID_STEPS` time steps.
+
+    The least-squares slope of those sample times against their sample numbers, each step
+    counted as its whole number of median steps (so that a dropped sample keeps its place).
+    The slope averages out timestamp jitter that a median step keeps: a 100 Hz log with ±1 ms
+    jitter gets 0.01 s, not 0.009997 s. Only the head of the log is used, so that a streaming
+    pass (:mod:`ropod_sysid.stream`) knows the grid after one chunk and chooses exactly the
+    grid of the in-memory path.
+    """
+    head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
+    steps = np.diff(head)
+    dt0 = float(np.median(steps))
+    if head.size < 3 or not dt0 > 0:
+        return dt0
+    k = np.concatenate([[0.0], np.cumsum(np.maximum(np.round(steps / dt0), 1.0))])
+    k -= k.mean()
+    slope = float(k @ (head - head.mean()) / (k @ k))
+    return slope if slope > 0 else dt0
+
+
+def grid_jitter(t: np.ndarray, dt: float) -> float:
+    """The half-width [samples] of a uniform jitter of a log's sample instants, from its first
+    :data:`GRID_STEPS` sample times (as :func:`grid_step`, so that a streaming pass finds the
+    same): √3 × the standard deviation of their distances from the best straight line through
+    them at the step ``dt``; 0 for a log on its grid (:func:`on_grid`). A jittered instant
+    dithers where the encoders' count grid falls (:func:`ropod_sysid.quantisation.tone_share`)."""
+    head = np.asarray(t[: GRID_STEPS + 1], dtype=float)
+    if head.size < 3 or not dt > 0 or on_grid(np.diff(head), dt):
+        return 0.0
+    k = np.round((head - head[0]) / dt)
+    dev = head - dt * k
+    return float(math.sqrt(3.0) * np.std(dev - dev.mean()) / dt)
+
+
+def on_grid(steps: np.ndarray, dt: float) -> bool:
+    """Whether every time step is within :data:`UNIFORM_RTOL` of the sample time ``dt``."""
+    steps = np.asarray(steps, dtype=float)
+    return bool(steps.size == 0 or np.max(np.abs(steps - dt)) <= UNIFORM_RTOL * dt)
+
+
+def jitter_note(source: str, max_step: float, min_step: float, dt: float) -> str:
+    """The note of a log whose sample times were put on a uniform grid."""
+    return (f"{source}: sample times jitter (max step {max_step:.4g} s, min {min_step:.4g} s); "
+            f"resampled to a uniform {dt:.4g} s grid")
