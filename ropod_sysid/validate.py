@@ -154,7 +154,10 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     if groups is None:
         step = max_step or FREE_RUN_NUMPY_STEP
     else:
-        step = max_step or (FREE_RUN_STEP if groups[9][1] == 0 else FREE_RUN_CONSTRAINED_STEP)
+        from ropod_sysid import simulate_jit
+
+        cons = simulate_jit.constraint_scratch(groups)  # None without constraint rows
+        step = max_step or (FREE_RUN_STEP if cons is None else FREE_RUN_CONSTRAINED_STEP)
     n_sub = max(1, int(np.ceil(float(np.max(dts, initial=0.0)) / step - 1e-9)))
     # each step holds the torques interpolated at its middle (zero-order hold, as the drives)
     frac = (np.arange(n_sub) + 0.5) / n_sub
@@ -164,8 +167,6 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
     held = (tau[:-1, None, :] * (1.0 - frac)[None, :, None]
             + tau[1:, None, :] * frac[None, :, None])  # (M − 1, n_sub, A)
     if groups is not None:
-        from ropod_sysid import simulate_jit
-
         n_steps = (t.size - 1) * n_sub
         n_act = tau.shape[1]
         x = np.concatenate([q0, qd0, angles0]).astype(float)[None]
@@ -175,7 +176,6 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
                np.empty((t.size, 1, 3)),
                np.empty((t.size, 1, angles0.size)), np.empty((t.size, 1, n_act)),
                np.zeros((t.size, 1, 3)), np.empty((t.size, 1)), np.zeros((t.size, 1, n_act)))
-        cons = simulate_jit.constraint_scratch(groups)
         with simulate_jit.first_compile(cons):
             simulate_jit.run(groups, cons, simulate_jit.base_parameters(model, params, friction),
                              np.array([dts[0] / n_sub, 1.0]), np.zeros((4, n_act)), n_sub, 0,
