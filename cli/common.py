@@ -18,8 +18,16 @@ from click.core import ParameterSource
 
 from ropod_sysid.errors import InputError, one_line_warning
 from ropod_sysid.io.atomic import OutputSet, file_kind
+from ropod_sysid.io.timebase import GAP_RULE
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+split_gaps_option = click.option(
+    "--split-gaps", is_flag=True,
+    help=f"A log with gaps in time ({GAP_RULE}) is refused; with this flag its pieces between "
+         "the gaps are fitted as separate logs, each with its own smoother ends (pieces too "
+         "short for the span are left out with a note). Pieces are named run.csv[1], "
+         "run.csv[2], … in the output.")
 
 
 def fail(message: str) -> None:

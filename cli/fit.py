@@ -16,6 +16,7 @@ from ropod_sysid.cli.common import (
     platform_option,
     quiet_option,
     reports_errors,
+    split_gaps_option,
     writes,
 )
 from ropod_sysid.errors import InputError
@@ -24,7 +25,6 @@ from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.paramfile import DEFAULT_NODE, ParameterFile, write_parameter_file
-from ropod_sysid.io.timebase import GAP_RULE
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
 from ropod_sysid.robust import ROBUST_METHODS
@@ -36,12 +36,6 @@ workers_option = click.option(
     "--workers", type=int, default=None, metavar="N",
     help="Reduce the logs in parallel on a local Dask cluster of N worker processes "
          "(needs: pip install 'ropod-sysid[dask]').")
-split_gaps_option = click.option(
-    "--split-gaps", is_flag=True,
-    help=f"A log with gaps in time ({GAP_RULE}) is refused; with this flag its pieces between "
-         "the gaps are fitted as separate logs, each with its own smoother ends (pieces too "
-         "short for the span are left out with a note). Pieces are named run.csv[1], "
-         "run.csv[2], … in the output.")
 dask_option = click.option(
     "--dask", "dask_address", default=None, metavar="ADDRESS",
     help="Reduce the logs on the workers of a running Dask scheduler, e.g. tcp://host:8786.")
@@ -247,7 +241,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         if report_path is not None:  # its workers load matplotlib while the fit reads the logs
             from ropod_sysid.report.painter import Painter
 
-            painter = stack.enter_context(Painter(layout=platform.layout, platform=platform))
+            painter = stack.enter_context(Painter(layout=platform.layout))
         # with --report, the fit's pass also gathers what the report draws: no second reading
         result = fit_files(list(logs), platform, options, workers=workers,
                            dask_address=dask_address, quiet=quiet, plots=painter is not None)

@@ -6,6 +6,8 @@ from typing import TYPE_CHECKING
 
 import click
 
+# the fit and the report are imported in the command, after the drawing processes have been
+# forked (ropod_sysid.report.painter): they load matplotlib meanwhile
 from ropod_sysid.cli.common import (
     INPUT,
     LOG_INPUT,
@@ -13,16 +15,14 @@ from ropod_sysid.cli.common import (
     platform_option,
     quiet_option,
     reports_errors,
+    split_gaps_option,
     writes,
 )
-from ropod_sysid.cli.fit import pieces_of, split_gaps_option
-from ropod_sysid.fit import fit_settings
-from ropod_sysid.io.paramfile import read_parameter_file
 from ropod_sysid.platform import load_platform
-from ropod_sysid.regressor import Span
 
 if TYPE_CHECKING:
     from ropod_sysid.platform import Platform
+    from ropod_sysid.regressor import Span
     from ropod_sysid.report.painter import Painter
 
 
@@ -58,8 +58,8 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     from ropod_sysid.report.painter import Painter
 
     platform = load_platform(platform_path)
-    # drawing, and loading the compiled free run, start while the logs are read
-    with Painter(layout=platform.layout, platform=platform) as painter:
+    # the figures' processes load matplotlib while this one reads the logs
+    with Painter(layout=platform.layout) as painter:
         _report(platform, logs, params_path, out_path, compare_path, validate_paths, span,
                 split_gaps, quiet, painter)
     if not quiet:
@@ -70,6 +70,9 @@ def _report(platform: Platform, logs: tuple[str, ...], params_path: str, out_pat
             compare_path: str | None, validate_paths: tuple[str, ...], span: Span | None,
             split_gaps: bool, quiet: bool, painter: Painter) -> None:
     """The report command's work, its figures drawn by ``painter``."""
+    from ropod_sysid.cli.fit import pieces_of
+    from ropod_sysid.fit import fit_settings
+    from ropod_sysid.io.paramfile import read_parameter_file
     from ropod_sysid.report import read_comparison, result_from_parameter_file, write_fit_report
 
     pfile = read_parameter_file(params_path)

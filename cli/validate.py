@@ -12,8 +12,9 @@ from ropod_sysid.cli.common import (
     platform_option,
     quiet_option,
     reports_errors,
+    split_gaps_option,
 )
-from ropod_sysid.cli.fit import dask_option, split_gaps_option, workers_option
+from ropod_sysid.cli.fit import dask_option, workers_option
 from ropod_sysid.fit import fit_settings, parameters_of
 from ropod_sysid.io.paramfile import read_parameters
 from ropod_sysid.params import DynamicParameters

@@ -224,20 +224,6 @@ def base_frame(theta: np.ndarray, qd: np.ndarray) -> np.ndarray:
     return np.column_stack([c * qd[:, 0] + s * qd[:, 1], -s * qd[:, 0] + c * qd[:, 1], qd[:, 2]])
 
 
-def load_free_run(platform: Platform) -> None:
-    """Load what :func:`free_run` on ``platform`` needs when it is compiled (numba and the
-    loop from its cache: about 0.5 s once per process) by a free run of two steps with unit
-    parameters, e.g. in a process that will integrate free runs later."""
-    model = PlatformModel(platform)
-    names = model.parameter_names("per-wheel")
-    params = DynamicParameters.from_vector(np.ones(len(names)), names)
-    t = np.array([0.0, 0.01])
-    if _compiled_groups(model, params, t) is None:
-        return
-    free_run(model, params, t, np.zeros(3), np.zeros(model.n_dof),
-             np.zeros(platform.layout.n_angles), np.zeros((2, platform.layout.n_currents)))
-
-
 def _compiled_groups(model: PlatformModel, params: DynamicParameters, t: np.ndarray
                      ) -> tuple[np.ndarray, ...] | None:
     """The unit groups for the compiled loop, or None for :func:`free_run`'s numpy path: a

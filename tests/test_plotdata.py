@@ -112,7 +112,7 @@ def test_fit_files_keeps_bounded_plot_data_and_the_report_needs_no_logs(
         raise AssertionError("the report read a log again")
 
     monkeypatch.setattr(stream_module, "stream_log", no_second_pass)
-    monkeypatch.setattr("ropod_sysid.report.stream_log", no_second_pass)
+    monkeypatch.setattr("ropod_sysid.report.html.stream_log", no_second_pass)
     html = render_fit_report(result)
     assert html.count("data:image/png;base64,") == 2 * 2 + 5  # + autocorrelation, prediction
     with pytest.raises(InputError, match="kept no plot data; give the fit's logs"):

@@ -60,7 +60,7 @@ from ropod_sysid.plotdata import LogPlot
 from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
 from ropod_sysid.report.correlation import correlation_table
-from ropod_sysid.report.painter import Drawn, Painter, Pending, png_uri
+from ropod_sysid.report.painter import Drawn, Painter
 from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
@@ -264,7 +264,7 @@ def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
     per log its kept rows' times and errors.
 
     The numbers (rows, RMS per DOF) come from the log's triangles, so they cover every row;
-    the figures from its plot data. The free run is :func:`_free_runs`'.
+    the figures from its plot data. The free run is :func:`_free_run_views`'.
     """
     platform = result.platform
     views, errs, vels = [], [], []
@@ -302,11 +302,11 @@ def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
 
 
 def free_run_view(platform: Platform, params: DynamicParameters, plot: LogPlot, first: bool
-                  ) -> tuple[dict[str, float] | None, float | None, bytes | None]:
+                  ) -> tuple[dict[str, float] | None, float | None, tuple[Any, ...] | None]:
     """A log's free run (every log where it is compiled, else the first log's first
     :func:`~ropod_sysid.validate.numpy_free_run_seconds`): its fit % per DOF, the time it
-    covers [s] and, on the first log, its figure (PNG); all None where there is none. Done by
-    a painter's worker."""
+    covers [s] and, on the first log, the arguments of its figure
+    (:func:`ropod_sysid.report.figures.predicted_velocity`); all None where there is none."""
     model = PlatformModel(platform)
     compiled = runs_compiled(model, params, plot.t_rows)
     if plot.state_rows is None or len(plot.t_rows) <= 2 or not (compiled or first):
@@ -317,29 +317,25 @@ def free_run_view(platform: Platform, params: DynamicParameters, plot: LogPlot, 
     fit_pct = dict(zip(("x", "y", "theta"), map(float, fit_percentage(measured, predicted)),
                        strict=True))
     span = float(plot.t_rows[np.isfinite(predicted[:, 0])][-1] - plot.t_rows[0])
-    png = None
-    if first:
-        from ropod_sysid.report import figures
-
-        png = figures.predicted_velocity(plot.t_rows, measured, predicted, fit_pct)
-    return fit_pct, span, png
+    figure = (plot.t_rows, measured, predicted, fit_pct) if first else None
+    return fit_pct, span, figure
 
 
-def _free_runs(result: FitResult, plots: Sequence[LogPlot], painter: Painter) -> list[Pending]:
-    """Each log's :func:`free_run_view`, the first log's first (its figure comes after it):
-    integrated by the painter's workers while they draw the other figures."""
+def _free_run_views(views: list[dict[str, Any]], result: FitResult, plots: Sequence[LogPlot],
+                    painter: Painter) -> None:
+    """Each log's :func:`free_run_view` (fit %, time and the first log's figure) into the
+    logs' ``views``: integrated here while the painter's workers draw the other figures."""
     params = result.fitted_parameters()
-    return [painter.submit(free_run_view, result.platform, params, plot, k == 0)
-            for k, plot in enumerate(plots)]
-
-
-def _free_run_views(views: list[dict[str, Any]], runs: Sequence[Pending]) -> None:
-    """The free runs' fit %, time and figure into the logs' ``views``."""
-    for view, run in zip(views, runs, strict=True):
-        fit_pct, span, png = run.get()
+    drawn = None
+    for k, (view, plot) in enumerate(zip(views, plots, strict=True)):
+        fit_pct, span, figure = free_run_view(result.platform, params, plot, k == 0)
+        if figure is not None:
+            drawn = painter.draw("predicted_velocity", *figure)
         view["fit_pct"] = fit_pct
-        view["prediction"] = None if png is None else png_uri(png)
+        view["prediction"] = None
         view["prediction_span"] = span
+    if drawn is not None:
+        views[0]["prediction"] = drawn.uri()
 
 
 def _parameter_rows(result: FitResult, shown: np.ndarray,
@@ -410,7 +406,7 @@ def render_fit_report(result: FitResult, logs: Sequence[Source] | None = None, *
     if painter is not None:
         return _render(result, logs, painter, compare, compare_label, validation_logs,
                        params_source, notes, title)
-    with Painter(workers, result.platform.layout, result.platform) as own:
+    with Painter(workers, result.platform.layout) as own:
         return _render(result, logs, own, compare, compare_label, validation_logs,
                        params_source, notes, title)
 
@@ -431,11 +427,11 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
     verdict = identifiability_verdict(result)
 
     plots = _plots(result, logs)
-    runs = _free_runs(result, plots, painter)  # the longest work first
     log_views, all_err, all_vel, series = _log_views(result, plots, shown, painter)
     rows, only_other = _parameter_rows(result, shown, compare_pf)
     n_free = len(sol.names) - len(sol.fixed)
-    # every figure that needs no free run is being drawn while the free runs integrate
+    # every figure that needs no free run is drawn by the painter while this process integrates
+    # the free runs (_free_run_views, below)
     figures = {
         "sv_figure": painter.draw("singular_values", sol.singular_values, sol.rank,
                                   result.options.rcond),
@@ -459,7 +455,7 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
                                        TORQUE_THRESHOLD),
             })
 
-    _free_run_views(log_views, runs)
+    _free_run_views(log_views, result, plots, painter)
     warnings = []
     n_implausible = sum(1 for r in rows if any(f[0] == "implausible" for f in r["flags"]))
     if n_implausible:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from multiprocessing.process import BaseProcess
 
-    from ropod_sysid.platform import Layout, Platform
+    from ropod_sysid.platform import Layout
 
 __all__ = ["Drawn", "Painter", "Pending", "default_workers", "png_uri"]
 
@@ -50,16 +50,6 @@ def _figure(name: str, args: tuple[Any, ...]) -> bytes:
     from ropod_sysid.report import figures
 
     return getattr(figures, name)(*args)
-
-
-def _warm(layout: Layout | None, platform: Platform | None = None) -> None:
-    from ropod_sysid.report import figures
-
-    figures.warm(layout)
-    if platform is not None:
-        from ropod_sysid.validate import load_free_run
-
-        load_free_run(platform)
 
 
 PARENT_CHECK_S = 1.0  # how often an idle drawing process checks that its parent lives [s]
@@ -103,17 +93,19 @@ def _draw_loop(tasks: Any, results: Any, lock: Any, stop: Any) -> None:
 
 
 def _painter(tasks: Any, results: Any, lock: Any, stop: Any, workers: int, warm: bool,
-             layout: Layout | None, platform: Platform | None, reader: Any) -> None:
-    """The first drawing process: loads matplotlib and builds the per-log figures once, and
-    with ``platform`` the compiled free run (:func:`_warm`), then forks the other
-    ``workers`` − 1, which so start warm; all draw.
+             layout: Layout | None, reader: Any) -> None:
+    """The first drawing process: loads matplotlib and builds the per-log figures once
+    (:func:`ropod_sysid.report.figures.warm`), then forks the other ``workers`` − 1, which so
+    start warm; all draw.
     Ctrl-C is the parent's to handle (it stops the drawing). ``reader``: the parent's end of
     ``results``, closed here (so that a drawer whose parent has gone gets an error sending,
     and the parent's end sees the last drawer leave)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     reader.close()
     if warm:
-        _warm(layout, platform)
+        from ropod_sysid.report import figures
+
+        figures.warm(layout)
     children = []
     for _ in range(workers - 1):
         pid = os.fork()
@@ -154,9 +146,7 @@ class Painter:
     """Draws figures of :mod:`ropod_sysid.report.figures` in ``workers`` forked processes
     (default :func:`default_workers`) or, with 1, in this process. ``layout``: the platform's
     log layout, for the workers to build the per-log figures in advance. Use it as a context
-    manager, so that the workers end (at once on an error). ``platform``: the platform whose
-    free runs the workers will integrate (:meth:`submit`; numba and the compiled loop are
-    loaded in advance too, about 0.5 s).
+    manager, so that the workers end (at once on an error).
 
     One process is forked from this one; it loads matplotlib and builds the per-log figures
     while this process reads the logs, then forks the other workers, which so start warm
@@ -164,8 +154,7 @@ class Painter:
     the shipped sample). The workers take the figures from one queue in the order they are
     asked for; a thread here collects the PNGs as they come."""
 
-    def __init__(self, workers: int | None = None, layout: Layout | None = None,
-                 platform: Platform | None = None) -> None:
+    def __init__(self, workers: int | None = None, layout: Layout | None = None) -> None:
         n = default_workers() if workers is None else workers
         if n < 1:
             raise ValueError(f"workers {n}: at least 1")
@@ -186,7 +175,7 @@ class Painter:
         self._ended = False
         self.pool = ctx.Process(target=_painter, name="ropod-sysid-painter", daemon=True,
                                 args=(self._tasks, results, ctx.Lock(), self._stop, n, warm,
-                                      layout, platform, self._results))
+                                      layout, self._results))
         self.pool.start()
         results.close()  # the drawers hold the sending ends: the last to end ends the results
         self._collector = threading.Thread(target=self._collect, daemon=True,
