@@ -263,3 +263,34 @@ def test_a_missing_trajectory_is_named_as_a_file_not_a_log(files, tmp_path):
             str(d / "platform.yaml"))
     one_line_error(r, f"{tmp_path / 'nope.csv'}: no such file; check the path")
     assert not (tmp_path / "run.csv").exists()
+
+
+def test_console_script_exits_with_the_commands_status_and_flushed_output(tmp_path):
+    """The console script (``run``) leaves by os._exit after the exit handlers: the status is
+    the command's, everything printed reaches a pipe or a file, and an error is one line."""
+    import subprocess
+    import sys
+
+    def script(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", "from ropod_sysid.cli.main import run; "
+                               "run()", *args], capture_output=True, text=True, timeout=60)
+
+    helped = script("fit", "--help")
+    assert helped.returncode == 0, helped.stderr
+    assert helped.stdout.startswith("Usage: ") and helped.stdout.rstrip().endswith(
+        "Show this message and exit.")
+    missing = script("fit", str(tmp_path / "none.csv"), "--platform", "p.yaml",
+                     "--out", str(tmp_path / "o.json"))
+    assert missing.returncode == 2
+    assert missing.stderr.count("\n") == 1 and missing.stderr.startswith("error: ")
+    assert not (tmp_path / "o.json").exists()
+    unknown = script("nosuch")
+    assert unknown.returncode == 2 and "No such command" in unknown.stderr
+    # an exit handler registered by a command still runs
+    marker = tmp_path / "handled"
+    ran = subprocess.run([sys.executable, "-c", "import atexit, sys; from ropod_sysid.cli.main "
+                          f"import run; atexit.register(lambda: open({str(marker)!r}, 'w')"
+                          ".close()); sys.argv = ['ropod-sysid', '--version']; run()"],
+                         capture_output=True, text=True, timeout=60)
+    assert ran.returncode == 0 and ran.stdout.startswith("ropod-sysid, version ")
+    assert marker.exists()
