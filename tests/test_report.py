@@ -491,3 +491,18 @@ def test_the_drawers_follow_the_environment(monkeypatch):
     assert painter.default_workers() == 3
     monkeypatch.setenv(painter.DRAWERS_ENV, "many")
     assert painter.default_workers() in (1, 2)
+
+
+def test_logs_streamed_side_by_side_give_the_same_result(off_square, runs_off_square, tmp_path):
+    """result_from_parameter_file with two threads equals one thread's, log for log."""
+    logs = [r.log for r in runs_off_square]
+    path = tmp_path / "params.json"
+    write_parameter_file(fit_logs(logs, off_square).parameter_file(), path)
+    pfile = read_parameter_file(path)
+    one, _ = result_from_parameter_file(off_square, logs, pfile, threads=1)
+    two, _ = result_from_parameter_file(off_square, logs, pfile, threads=2)
+    assert [lf.source for lf in two.logs] == [lf.source for lf in one.logs]
+    np.testing.assert_array_equal(two.solution.singular_values, one.solution.singular_values)
+    for a, b in zip(one.logs, two.logs, strict=True):
+        assert a.rms == b.rms
+        np.testing.assert_array_equal(a.plot.b_rows, b.plot.b_rows)
