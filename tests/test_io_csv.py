@@ -406,3 +406,27 @@ def test_gzip_round_trip_is_bit_exact(tmp_path):
     back = read_log(path, pf)
     for name in ("t", "angles", "currents"):
         assert np.array_equal(getattr(back, name), getattr(log, name))
+
+
+@pytest.mark.parametrize("compressed", [False, True])
+def test_fast_chunks_of_any_block_size_are_the_file(tmp_path, compressed):
+    """The streaming reader's pieces (one buffer, parsed in place, the unfinished line carried
+    to the next read) give the file's values whatever the block size: smaller than a line (the
+    buffer grows), a line and a bit, many lines; plain and gzip (which reads short)."""
+    import gzip
+
+    rng = np.random.default_rng(3)
+    values = rng.normal(size=(200, 4)) * 10.0 ** rng.integers(-3, 12, size=(200, 4))
+    long_row = 150  # one line far longer than the others
+    lines = ["a,b,c,d"] + [",".join(repr(float(v)) for v in row) for row in values]
+    lines[1 + long_row] = ",".join(f"{float(v):.300e}" for v in values[long_row])
+    text = ("\n".join(lines) + "\n").encode()
+    path = tmp_path / ("t.csv.gz" if compressed else "t.csv")
+    path.write_bytes(gzip.compress(text) if compressed else text)
+    expected = np.array([[float(x) for x in ln.split(",")] for ln in lines[1:]]).T
+    for block in (7, 40, 1000, 1 << 20):
+        parts = list(csvlog._fast_chunks(path, str(path), 4, [0, 1, 2, 3], block))
+        got = np.concatenate(parts, axis=1)
+        np.testing.assert_array_equal(got, expected, err_msg=f"block {block}")
+        if block < len(lines[1 + long_row]):
+            assert len(parts) > 2
