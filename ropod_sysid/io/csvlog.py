@@ -424,9 +424,9 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
                 end = held + _read_into(f, buf, held)
                 if end == len(buf):  # full: parse up to its last line end
                     cut = buf.rfind(b"\n", 0, end) + 1
-                    if cut == 0:  # a line longer than the buffer: read more
-                        held = end
-                        buf.extend(bytes(len(buf)))
+                    if cut == 0:  # a line longer than the buffer: read more, into a
+                        held = end  # new one (the old may still be exported to Arrow)
+                        buf = buf + bytes(len(buf))
                         continue
                 else:  # the end of the file
                     cut = end
