@@ -103,6 +103,7 @@ def run() -> None:
     import os
     import sys
 
+    _keep_freed_memory()
     try:
         main.main()
         code: Any = 0
@@ -120,3 +121,29 @@ def run() -> None:
         except (OSError, ValueError):  # a closed pipe (`| head`): what was written is lost
             code = code or 1
     os._exit(code)
+
+
+# glibc's mallopt parameters (malloc.h) and the values the console script sets
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+MMAP_THRESHOLD_B = 32 << 20  # glibc's largest on 64-bit systems
+TRIM_THRESHOLD_B = 1 << 30
+
+
+def _keep_freed_memory() -> None:
+    """Have glibc's malloc keep the memory a chunk's arrays free for the next chunk's instead
+    of handing it back to the system and faulting it in again, zeroed: arrays up to
+    :data:`MMAP_THRESHOLD_B` from the heap, which is trimmed only above
+    :data:`TRIM_THRESHOLD_B` free at its top. Measured on the fit of a 60-minute 1 kHz CSV
+    log: 510,000 → 63,000 page faults, 1.6–1.9 → 0.6 s of system time, 6.3–6.6 → 5.2–5.6 s,
+    the peak memory the same (327 → 334 MB). Elsewhere than glibc, nothing."""
+    import ctypes
+    import platform
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return
+    try:
+        libc = ctypes.CDLL(None)  # this process's symbols: glibc's among them
+        libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_B)
+        libc.mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD_B)
+    except (OSError, AttributeError):  # no such library or function: the defaults stay
+        pass
