@@ -463,14 +463,17 @@ def test_figures_drawn_by_workers_are_those_drawn_here(sim):
     platform = sim[0]
     t = np.linspace(0.0, 5.0, 500)
     b = np.column_stack([np.sin(t), np.cos(t), 0.1 * t])
+    logs = [(t, b, 0.9 * b, None), (t, -b, -0.8 * b, None)]
     with painter.Painter(1) as one:
         here = one.draw("fit_vs_measured", t, b, 0.9 * b).uri()
         hist = one.draw("residual_histograms", b).uri()
+        each = [d.uri() for d in one.draw_each("fit_vs_measured_logs", 2, logs)]
     if "fork" not in multiprocessing.get_all_start_methods():
         pytest.skip("no fork here: every figure is drawn in this process")
     with painter.Painter(2, platform.layout) as p:
         assert p.draw("fit_vs_measured", t, b, 0.9 * b).uri() == here
         assert p.draw("residual_histograms", b).uri() == hist
+        assert [d.uri() for d in p.draw_each("fit_vs_measured_logs", 2, logs)] == each
         drawn = p.draw("residual_histograms", "not an array")
         with pytest.raises(Exception, match="not an array|index|dimension|shape|str"):
             drawn.uri()
@@ -506,3 +509,40 @@ def test_logs_streamed_side_by_side_give_the_same_result(off_square, runs_off_sq
     for a, b in zip(one.logs, two.logs, strict=True):
         assert a.rms == b.rms
         np.testing.assert_array_equal(a.plot.b_rows, b.plot.b_rows)
+
+
+def test_logs_of_one_length_share_their_axes_and_are_drawn_once():
+    """The per-log figures of logs about as long are drawn on the limits of all their data,
+    the axes once and each log's lines over them (blitting): each log's image is the full
+    drawing of that log on those limits but where its lines cross the axes' own lines (0.01 %
+    of the pixels); logs of very different lengths are each drawn on their own."""
+    import io
+
+    from PIL import Image
+
+    from ropod_sysid.report import figures
+
+    def pixels(png: bytes) -> np.ndarray:
+        return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+    t = np.linspace(0.0, 20.0, 3000)
+    b = np.column_stack([40 * np.sin(t), 30 * np.cos(0.7 * t), 5 * np.sin(0.3 * t)])
+    logs = [(t, b, 0.95 * b, None), (t * 1.05, -2 * b, -1.9 * b, None)]
+    shared = figures.fit_vs_measured_logs(logs)
+    assert len(shared) == 2 and shared[0] != shared[1]
+    fig = figures._BUILT[figures.FitFigure]
+    limits = [(ax.get_xlim(), ax.get_ylim()) for ax in fig.axes]
+    assert limits[0][1][1] > 2 * 40 * 0.99  # the second log's range, in the first's image
+    for log, png in zip(logs, shared, strict=True):
+        fig.set_log(*log)
+        with figures._style():
+            for ax, (x, y) in zip(fig.axes, limits, strict=True):
+                ax.set_xlim(x)
+                ax.set_ylim(y)
+            whole = pixels(figures._png(fig.fig))
+        differ = np.any(whole != pixels(png), axis=-1).mean()
+        assert differ < 0.002, differ  # (without the lines: 2.3 %)
+    # a 2 s log beside the 20 s one: each on its own, as fit_vs_measured draws it
+    short = (t[:300], b[:300], 0.95 * b[:300], None)
+    alone = figures.fit_vs_measured_logs([logs[0], short])
+    assert alone == [figures.fit_vs_measured(*logs[0]), figures.fit_vs_measured(*short)]

@@ -18,7 +18,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.ticker import MaxNLocator, NullLocator
+from matplotlib.ticker import FuncFormatter, MaxNLocator, NullLocator
+from matplotlib.transforms import Bbox
 
 if TYPE_CHECKING:
     from ropod_sysid.platform import Layout
@@ -115,11 +116,15 @@ def _png(fig: Figure) -> bytes:
     Measured on the report's figures: a third of the bytes of matplotlib's RGBA PNG and half
     its encoding time; the figures are flat colours and antialiased edges.
     """
+    fig.patch.set_facecolor("white")
+    fig.canvas.draw()
+    return _encode(fig.canvas)
+
+
+def _encode(canvas: FigureCanvasAgg) -> bytes:
+    """What ``canvas`` holds now as a PNG of at most 256 colours (:func:`_png`)."""
     from PIL import Image  # matplotlib's own dependency
 
-    fig.patch.set_facecolor("white")
-    canvas = fig.canvas
-    canvas.draw()
     width, height = canvas.get_width_height(physical=True)
     # read in place and converted by PIL (a strided numpy view costs a copy twice as slow)
     rgba = Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
@@ -208,6 +213,17 @@ class FitFigure:
                rms: Sequence[float] | None = None) -> bytes:
         """The figure of one log's rows: times t (r,), b_ID and A_ID,ext m* (r, 3). ``rms``:
         the RMS error per DOF over all rows (default: over the rows given)."""
+        self.set_log(t, b, fit, rms)
+        return _redraw(self.fig, self.axes)
+
+    @property
+    def changing(self) -> list[Any]:
+        """The artists that change from log to log (:func:`_render_shared`)."""
+        return [line for lines in self.lines for line in lines] + list(self.texts)
+
+    def set_log(self, t: np.ndarray, b: np.ndarray, fit: np.ndarray,
+                rms: Sequence[float] | None = None) -> None:
+        """One log's data in the lines and texts (:meth:`render`), nothing drawn."""
         err = b - fit
         for d, (b_line, fit_line, err_line) in enumerate(self.lines):
             b_line.set_data(*decimate(t, b[:, d]))
@@ -218,7 +234,6 @@ class FitFigure:
             else:
                 r = float(np.sqrt(np.mean(err[:, d] ** 2))) if len(err) else float("nan")
             self.texts[d].set_text(f"RMS error {r:.3g} {DOF_UNITS[d]}")
-        return _redraw(self.fig, self.axes)
 
 
 _BUILT: dict[Any, Any] = {}  # this process's figures built once and redrawn (FitFigure, …)
@@ -299,6 +314,16 @@ class InputsFigure:
         self.fig, self.axes = fig, [ax_path, ax_vel, ax_piv, ax_tau]
 
     def render(self, plot: LogPlot) -> bytes:
+        self.set_log(plot)
+        return _redraw(self.fig, self.axes)
+
+    @property
+    def changing(self) -> list[Any]:
+        """The artists that change from log to log (:func:`_render_shared`)."""
+        return [self.path, self.start, self.end, *self.vel, *self.piv, *self.tau]
+
+    def set_log(self, plot: LogPlot) -> None:
+        """One log's data in the lines (:meth:`render`), nothing drawn."""
         self.path.set_data(*decimate(plot.path[0][:, 0], plot.path[1][:, 0]))
         self.start.set_data([plot.start[0]], [plot.start[1]])
         self.end.set_data([plot.end[0]], [plot.end[1]])
@@ -309,7 +334,6 @@ class InputsFigure:
         tt, tau = plot.torque
         for j, line in enumerate(self.tau):  # every actuator
             line.set_data(*decimate(tt[:, j], tau[:, j]))
-        return _redraw(self.fig, self.axes)
 
 
 def inputs(plot: LogPlot, layout: Layout) -> bytes:
@@ -319,6 +343,73 @@ def inputs(plot: LogPlot, layout: Layout) -> bytes:
     if fig is None:
         fig = _BUILT[key] = InputsFigure(layout)
     return fig.render(plot)
+
+
+# logs whose time spans differ by at most this share of the longest are drawn on the same axes
+# limits (:func:`_render_shared`); others each on its own
+SHARED_SPAN = 0.1  # (the report says "within 10 %": templates/report.html)
+
+
+def fit_vs_measured_logs(logs: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray,
+                                              Sequence[float] | None]]) -> list[bytes]:
+    """:func:`fit_vs_measured` of each of ``logs`` ((t, b, fit, rms) each): on the same axes
+    limits when their time spans agree (:data:`SHARED_SPAN`), which are then drawn once
+    (:func:`_render_shared`)."""
+    fig = _BUILT.get(FitFigure)
+    if fig is None:
+        fig = _BUILT[FitFigure] = FitFigure()
+    return _render_shared(fig, [tuple(item) for item in logs], [item[0] for item in logs])
+
+
+def inputs_logs(plots: Sequence[LogPlot], layout: Layout) -> list[bytes]:
+    """:func:`inputs` of each of ``plots``, as :func:`fit_vs_measured_logs` draws them."""
+    key = (InputsFigure, tuple(layout.columns()))
+    fig = _BUILT.get(key)
+    if fig is None:
+        fig = _BUILT[key] = InputsFigure(layout)
+    return _render_shared(fig, [(plot,) for plot in plots], [plot.torque[0] for plot in plots])
+
+
+def _render_shared(figure: FitFigure | InputsFigure, args: list[tuple[Any, ...]],
+                   times: list[np.ndarray]) -> list[bytes]:
+    """``figure`` with each log's ``args`` (of its ``set_log``). Where the logs' ``times``
+    span about as long (:data:`SHARED_SPAN`), every axes gets the limits of all the logs'
+    data together, the axes, ticks, grid and legends are drawn once, and each log's lines
+    and texts (``figure.changing``) are drawn over a copy of that (matplotlib's blitting):
+    0.03 s instead of 0.09 s a figure of the fit per DOF. Otherwise each is drawn whole
+    (:func:`_redraw`), on its own data's limits."""
+    spans = [float(np.ptp(t)) if np.size(t) else 0.0 for t in times]
+    if len(args) < 2 or min(spans) < (1.0 - SHARED_SPAN) * max(spans):
+        return [figure.render(*a) for a in args]
+    fig, axes, changing = figure.fig, figure.axes, figure.changing
+    with _style():
+        limits = []
+        for a in args:
+            figure.set_log(*a)
+            for ax in axes:
+                ax.relim()
+            limits.append([ax.dataLim.frozen() for ax in axes])
+        for k, ax in enumerate(axes):
+            ax.dataLim.set(Bbox.union([box[k] for box in limits]))
+            ax.autoscale_view()
+        fig.patch.set_facecolor("white")
+        canvas = fig.canvas
+        for artist in changing:
+            artist.set_animated(True)
+        try:
+            canvas.draw()  # everything but the animated artists
+            background = canvas.copy_from_bbox(fig.bbox)
+            out = []
+            for a in args:
+                figure.set_log(*a)
+                canvas.restore_region(background)
+                for artist in changing:
+                    artist.axes.draw_artist(artist)
+                out.append(_encode(canvas))
+        finally:
+            for artist in changing:
+                artist.set_animated(False)
+    return out
 
 
 def warm(layout: Layout | None = None) -> None:
@@ -353,12 +444,27 @@ def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:
             _legend_above(ax)
         ax.set_yscale("log")
         ax.yaxis.set_minor_locator(NullLocator())
+        ax.yaxis.set_major_formatter(FuncFormatter(_power_of_ten))
         ax.set_xlabel("index")
         ax.set_ylabel("singular value")
         ax.set_xticks(k if len(k) <= 40 else k[:: int(np.ceil(len(k) / 40))])
         ax.set_xlim(0.3, len(sv) + 0.7)
         _title(ax, "column-scaled, weighted, stacked regressor")
         return _png(fig)
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _power_of_ten(value: float, _pos: int | None = None) -> str:
+    """A log axis' tick label as plain text, 10⁻³ (matplotlib's own, $10^{-3}$, goes through
+    mathtext's parser: a fifth of the figure's time)."""
+    if not value > 0:
+        return ""
+    k = round(float(np.log10(value)))
+    if abs(value / 10.0**k - 1.0) > 1e-9:
+        return f"{value:.2g}"
+    return "1" if k == 0 else "10" if k == 1 else f"10{str(k).translate(_SUPERSCRIPT)}"
 
 
 def predicted_velocity(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray,

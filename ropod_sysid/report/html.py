@@ -280,6 +280,7 @@ def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
     platform = result.platform
     views, errs, vels = [], [], []
     series: list[tuple[np.ndarray, np.ndarray]] = []
+    fig13: list[tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]] = []
     for k, (lf, plot) in enumerate(zip(result.logs, plots, strict=True)):
         fit = plot.a_rows @ shown
         err = plot.b_rows - fit
@@ -301,12 +302,17 @@ def _log_views(result: FitResult, plots: Sequence[LogPlot], shown: np.ndarray,
             "notes": list(lf.notes),
             "span_samples": plot.span_samples,
             "row_step": plot.row_step,
-            "fig13": painter.draw("fit_vs_measured", plot.t_rows, plot.b_rows, fit,
-                                  [rms["x"], rms["y"], rms["theta"]]),
-            "inputs": painter.draw("inputs", plot, platform.layout),
             "pose_source": "tracker (x_b, y_b, θ_b columns)" if plot.has_pose
             else "odometry",
         })
+        fig13.append((plot.t_rows, plot.b_rows, fit, [rms["x"], rms["y"], rms["theta"]]))
+    # each kind of figure for every log in one piece of work, on shared axes where it can
+    for view, drawn in zip(views, painter.draw_each("fit_vs_measured_logs", len(views), fig13),
+                           strict=True):
+        view["fig13"] = drawn
+    for view, drawn in zip(views, painter.draw_each("inputs_logs", len(views), list(plots),
+                                                    platform.layout), strict=True):
+        view["inputs"] = drawn
     all_err = np.concatenate(errs) if errs else np.zeros((0, 3))
     all_vel = np.concatenate(vels) if vels else np.zeros((0, 3))
     return views, all_err, all_vel, series

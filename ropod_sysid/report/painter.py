@@ -227,6 +227,14 @@ class Painter:
         pending = self.submit(_figure, name, args)
         return Drawn(pending._result, pending._wait)
 
+    def draw_each(self, name: str, n: int, *args: Any) -> list[Drawn]:
+        """The ``n`` figures ``figures.<name>(*args)`` draws in one piece of work (a list of
+        PNG bytes), each as a :class:`Drawn` of its own."""
+        pending = self.submit(_figure, name, args)
+        if pending._wait is None:
+            return [Drawn(png) for png in pending.get()]
+        return [Drawn(wait=lambda k=k: pending.get()[k]) for k in range(n)]  # type: ignore[misc]
+
     def __enter__(self) -> Painter:
         return self
 
