@@ -240,8 +240,10 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         painter = None
         if report_path is not None:  # its workers load matplotlib while the fit reads the logs
             from ropod_sysid.report.painter import Painter
+            from ropod_sysid.validate import preload_free_run
 
             painter = stack.enter_context(Painter(layout=platform.layout))
+            preload_free_run(platform)  # numba for the free runs, while the fit reads the logs
         # with --report, the fit's pass also gathers what the report draws: no second reading
         result = fit_files(list(logs), platform, options, workers=workers,
                            dask_address=dask_address, quiet=quiet, plots=painter is not None)

@@ -60,6 +60,9 @@ def command(logs: tuple[str, ...], platform_path: str, params_path: str, out_pat
     platform = load_platform(platform_path)
     # the figures' processes load matplotlib while this one reads the logs
     with Painter(layout=platform.layout) as painter:
+        from ropod_sysid.validate import preload_free_run  # (after the fork: it loads the fit)
+
+        preload_free_run(platform)  # numba for the free runs, while the logs are read
         _report(platform, logs, params_path, out_path, compare_path, validate_paths, span,
                 split_gaps, quiet, painter)
     if not quiet:
