@@ -10,7 +10,7 @@ from ropod_sysid.fit import FitOptions, fit_logs
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.params import parameter_names, thesis_fixed_masses
 from ropod_sysid.platform import ropod_platform
-from ropod_sysid.regressor import DelayBracket, preprocess, triangles
+from ropod_sysid.regressor import DelayBracket, Span, preprocess, triangles
 from ropod_sysid.simulate import Sensors
 from ropod_sysid.solve import jackknife_covariance, qr_triangle, solve, stretch_grams
 from ropod_sysid.stream import stream_log
@@ -100,6 +100,13 @@ def test_verdict_says_when_model_error_dominates(off_square, runs_off_square,
     verdict = identifiability_verdict(exact)
     assert verdict.startswith("full rank, but the residual is mostly model or discretisation "
                               "error"), verdict
+    assert verdict.endswith("; on clean logs of 200 Hz or more, --smoother quartic with "
+                            "--input-delay auto (or the drives' --control-period) removes most "
+                            "of a discretisation bias"), verdict
+    quartic = fit_logs([r.log for r in runs_off_square], off_square,
+                       FitOptions(span=Span.parse(None).with_smoother("quartic"),
+                                  control_period=0.001))
+    assert "--smoother quartic" not in identifiability_verdict(quartic)
     noisy = fit_logs(runs_off_square_noisy, off_square)
     assert model_error_ratio(noisy) < 1.5 < 3 < model_error_ratio(exact)
     assert "discretisation error" not in identifiability_verdict(noisy)
