@@ -546,3 +546,32 @@ def test_logs_of_one_length_share_their_axes_and_are_drawn_once():
     short = (t[:300], b[:300], 0.95 * b[:300], None)
     alone = figures.fit_vs_measured_logs([logs[0], short])
     assert alone == [figures.fit_vs_measured(*logs[0]), figures.fit_vs_measured(*short)]
+
+
+def test_a_bad_log_stops_the_logs_streamed_side_by_side(off_square, runs_off_square,
+                                                        monkeypatch, tmp_path):
+    """With logs streamed two at a time, a log's error is raised as soon as it comes: the
+    logs not yet begun are not read (the one beside it may be, and ends)."""
+    import time
+
+    from ropod_sysid.report import html
+
+    logs = [dataclasses.replace(r.log, source=f"log{k}") for k, r in enumerate(runs_off_square)]
+    path = tmp_path / "params.json"
+    write_parameter_file(fit_logs(logs, off_square).parameter_file(), path)
+    started = []
+
+    def pieces(log, *args, **kwargs):
+        started.append(log.source)
+        if log.source == "log0":
+            raise InputError("log0: bad")
+        time.sleep(0.3)
+        return []
+
+    monkeypatch.setattr(html, "stream_pieces", pieces)
+    t0 = time.perf_counter()
+    with pytest.raises(InputError, match="log0: bad"):
+        result_from_parameter_file(off_square, logs, read_parameter_file(path), threads=2)
+    assert time.perf_counter() - t0 < 0.25
+    time.sleep(0.4)  # a log begun beside the bad one ends; no other begins
+    assert started[0] == "log0" and set(started) <= {"log0", "log1"}, started

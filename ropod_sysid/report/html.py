@@ -22,9 +22,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
+from itertools import islice
 from pathlib import Path
 from typing import Any
 
@@ -152,11 +154,10 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
 
     streamed: list[StreamResult] = []
     n_threads = min(len(logs), default_processes() if threads is None else max(int(threads), 1))
-    with Progress(len(logs), "logs", quiet=quiet) as bar, \
-            ThreadPoolExecutor(n_threads, thread_name_prefix="ropod-sysid-log") as pool:
-        # logs side by side (their smoothing and the encoders' gram are numpy, which releases
-        # the GIL: 0.86 -> 0.67 s for the sample's four logs with their gram), in order
-        for done in (pool.map(pieces, logs) if n_threads > 1 else map(pieces, logs)):
+    # logs side by side (their smoothing and the encoders' gram are numpy, which releases the
+    # GIL: 0.86 -> 0.67 s for the sample's four logs with their gram), in order
+    with Progress(len(logs), "logs", quiet=quiet) as bar:  # (a bar on a terminal only)
+        for done in _in_order(pieces, logs, n_threads):
             streamed += done
             bar.update(1)
     systems = [res.triangles for res in streamed]
@@ -194,6 +195,26 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
                      f"{file_rms[1]:.4g} N m on the logs it was fitted to; on these logs it is "
                      f"{here[0]:.4g} N / {here[1]:.4g} N m")
     return result, notes
+
+
+def _in_order(func: Callable[[Any], Any], items: Sequence[Any], threads: int) -> Iterator[Any]:
+    """``func`` of each of ``items``, in order, ``threads`` of them at a time in threads; the
+    next begins only when the earliest is taken, so that an error (raised where its result is
+    taken) leaves the items not yet begun unread, and at most ``threads`` are held."""
+    if threads <= 1:
+        yield from map(func, items)
+        return
+    pool = ThreadPoolExecutor(threads, thread_name_prefix="ropod-sysid-log")
+    try:
+        rest = iter(items)
+        running = deque(pool.submit(func, item) for item in islice(rest, threads))
+        while running:
+            result = running.popleft().result()
+            for item in islice(rest, 1):
+                running.append(pool.submit(func, item))
+            yield result
+    finally:  # an error: the item begun beside it ends in the background
+        pool.shutdown(wait=False, cancel_futures=True)
 
 
 # ---------------------------------------------------------------------------------------------
