@@ -239,12 +239,25 @@ class FitFigure:
 _BUILT: dict[Any, Any] = {}  # this process's figures built once and redrawn (FitFigure, …)
 
 
+def _fit_figure() -> FitFigure:
+    """This process's :class:`FitFigure`, built on first use."""
+    if FitFigure not in _BUILT:
+        _BUILT[FitFigure] = FitFigure()
+    return _BUILT[FitFigure]
+
+
+def _inputs_figure(layout: Layout) -> InputsFigure:
+    """This process's :class:`InputsFigure` of ``layout``, built on first use."""
+    key = (InputsFigure, tuple(layout.columns()))
+    if key not in _BUILT:
+        _BUILT[key] = InputsFigure(layout)
+    return _BUILT[key]
+
+
 def fit_vs_measured(t: np.ndarray, b: np.ndarray, fit: np.ndarray,
                     rms: Sequence[float] | None = None) -> bytes:
     """:class:`FitFigure` of one log (the figure built once per process)."""
-    fig = _BUILT.get(FitFigure)
-    if fig is None:
-        fig = _BUILT[FitFigure] = FitFigure()
+    fig = _fit_figure()
     return fig.render(t, b, fit, rms)
 
 
@@ -338,10 +351,7 @@ class InputsFigure:
 
 def inputs(plot: LogPlot, layout: Layout) -> bytes:
     """:class:`InputsFigure` of one log (the figure built once per process and layout)."""
-    key = (InputsFigure, tuple(layout.columns()))
-    fig = _BUILT.get(key)
-    if fig is None:
-        fig = _BUILT[key] = InputsFigure(layout)
+    fig = _inputs_figure(layout)
     return fig.render(plot)
 
 
@@ -355,18 +365,13 @@ def fit_vs_measured_logs(logs: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray
     """:func:`fit_vs_measured` of each of ``logs`` ((t, b, fit, rms) each): on the same axes
     limits when their time spans agree (:data:`SHARED_SPAN`), which are then drawn once
     (:func:`_render_shared`)."""
-    fig = _BUILT.get(FitFigure)
-    if fig is None:
-        fig = _BUILT[FitFigure] = FitFigure()
+    fig = _fit_figure()
     return _render_shared(fig, [tuple(item) for item in logs], [item[0] for item in logs])
 
 
 def inputs_logs(plots: Sequence[LogPlot], layout: Layout) -> list[bytes]:
     """:func:`inputs` of each of ``plots``, as :func:`fit_vs_measured_logs` draws them."""
-    key = (InputsFigure, tuple(layout.columns()))
-    fig = _BUILT.get(key)
-    if fig is None:
-        fig = _BUILT[key] = InputsFigure(layout)
+    fig = _inputs_figure(layout)
     return _render_shared(fig, [(plot,) for plot in plots], [plot.torque[0] for plot in plots])
 
 
@@ -415,15 +420,11 @@ def _render_shared(figure: FitFigure | InputsFigure, args: list[tuple[Any, ...]]
 def warm(layout: Layout | None = None) -> None:
     """Build and draw once the figures a report redraws per log (fonts loaded, ticks laid
     out), e.g. in a drawing process while the logs are still being read."""
-    fig = _BUILT.get(FitFigure)
-    if fig is None:
-        fig = _BUILT[FitFigure] = FitFigure()
+    fig = _fit_figure()
     with _style():
         _png(fig.fig)
     if layout is not None:
-        key = (InputsFigure, tuple(layout.columns()))
-        if key not in _BUILT:
-            _BUILT[key] = InputsFigure(layout)
+        _inputs_figure(layout)
 
 
 def singular_values(sv: np.ndarray, rank: int, rcond: float) -> bytes:
