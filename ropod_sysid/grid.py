@@ -119,9 +119,10 @@ class _Grid:
         self._emit(head, final)
 
     def _emit(self, raw: _Samples, final: bool) -> None:
-        src = raw if self.tail is None else _Samples.join([self.tail, raw])
-        lead = 0 if self.tail is None else len(self.tail) - 1
-        steps = np.diff(src.t[lead:])
+        # (the steps from the previous chunk's last sample on; the chunks are joined only to
+        # resample, which needs the bracketing samples)
+        t = raw.t if self.tail is None else np.concatenate([self.tail.t[-1:], raw.t])
+        steps = np.diff(t)
         if steps.size:  # (time increases: iter_chunks checked it, ropod_sysid.io.timebase)
             self.max_step = max(self.max_step, float(steps.max()))
             self.min_step = min(self.min_step, float(steps.min()))
@@ -129,7 +130,9 @@ class _Grid:
             if not on_grid(steps, self.dt):  # type: ignore[arg-type]
                 raise _OffGrid
             self.sink.push(raw)
+            src = raw  # (only its last sample is used on)
         else:
+            src = raw if self.tail is None else _Samples.join([self.tail, raw])
             self._resample(src, final)
         self.tail = src.take(max(len(src) - 2, 0), len(src))
 

@@ -66,14 +66,16 @@ def unwrap_from(p: np.ndarray, corr0: np.ndarray | None = None,
     period = 2 * np.pi
     low, high = -period / 2, period / 2
     dd = np.diff(p, axis=0)
-    ph = np.zeros_like(dd)
     jump = np.abs(dd) >= high  # numpy's rule: smaller steps get no correction
-    if jump.any():
-        d = dd[jump]
-        ddmod = np.mod(d - low, period) + low
-        np.copyto(ddmod, high, where=(ddmod == low) & (d > 0))
-        ph[jump] = ddmod - d
     start = np.zeros_like(p[:1]) if corr0 is None else np.asarray(corr0, float)[None]
+    if not jump.any():  # the sum below of zero steps: the start's correction everywhere
+        corr = np.repeat(start, p.shape[0], axis=0)
+        return p + start, corr
+    ph = np.zeros_like(dd)
+    d = dd[jump]
+    ddmod = np.mod(d - low, period) + low
+    np.copyto(ddmod, high, where=(ddmod == low) & (d > 0))
+    ph[jump] = ddmod - d
     corr = np.cumsum(np.concatenate([start, ph]), axis=0)
     return p + corr, corr
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -295,3 +297,53 @@ def test_grid_step_averages_out_jitter_and_keeps_gaps():
     assert abs(timebase.grid_step(t) - 0.01) < 2e-8
     assert abs(float(np.median(np.diff(t))) - 0.01) > 1e-7  # what the median step gives
     assert timebase.grid_step(np.arange(500) * 0.005) == pytest.approx(0.005, rel=1e-14)
+
+
+class _Collect:
+    """A grid sink that keeps what it is given."""
+
+    def __init__(self) -> None:
+        self.parts: list[grid._Samples] = []
+
+    def start(self, dt: float, jitter: float = 0.0) -> None:
+        self.dt = dt
+
+    def push(self, samples: grid._Samples) -> None:
+        self.parts.append(samples)
+
+
+@pytest.mark.parametrize("sizes", [[1], [2, 1, 1, 3], [1, 1, 1, 1, 5]])
+def test_grid_pieces_of_one_sample(runs_off_square, sizes, monkeypatch):
+    """Pieces of one or two samples after the head (a log's last line, a short chunk): every
+    sample passes on once, the pivot angles unwrapped as one np.unwrap of the whole log (jumps
+    inside, between and next to the short pieces), and a step off the grid in a one-sample
+    piece is found."""
+    log = runs_off_square[0].log
+    wrapped = log.layout.wrapped
+    angles = log.angles.copy()
+    angles[:, wrapped] = np.angle(np.exp(1j * (angles[:, wrapped] * 40.0 + 3.0)))  # many jumps
+    log = dataclasses.replace(log, angles=angles)
+    monkeypatch.setattr(grid, "GRID_STEPS", 200)  # the grid starts after 200 steps
+    head = 250
+    cuts = np.cumsum([head, *sizes])
+    pieces = [log.slice(a, b) for a, b in zip([0, *cuts[:-1]], cuts, strict=True)]
+    pieces.append(log.slice(int(cuts[-1]), log.n_samples))
+    sink = _Collect()
+    g = grid._Grid("run.csv", False, sink)
+    for p in pieces:
+        g.push(p)
+    g.finish()
+    out = grid._Samples.join(sink.parts)
+    np.testing.assert_array_equal(out.t, log.t)
+    want = np.unwrap(angles[:, wrapped], axis=0)
+    np.testing.assert_array_equal(out.angles[:, wrapped], want)
+    assert g.max_step == np.diff(log.t).max() and g.min_step == np.diff(log.t).min()
+
+    t = log.t.copy()
+    t[cuts[-2]:] += 0.3 * np.diff(log.t[:2])  # the step into the last short piece is off
+    late = dataclasses.replace(log, t=t)
+    g = grid._Grid("run.csv", False, _Collect())
+    for a, b in zip([0, *cuts[:-2]], cuts[:-1], strict=True):
+        g.push(late.slice(a, b))
+    with pytest.raises(grid._OffGrid):
+        g.push(late.slice(int(cuts[-2]), int(cuts[-1])))
