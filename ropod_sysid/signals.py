@@ -17,6 +17,8 @@ non-uniform sample positions.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
@@ -259,11 +261,33 @@ def _overlap_save(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return valid.transpose(0, 2, 1).reshape(-1, m)[:out_len]
 
 
-def _apply_ends(y2: np.ndarray, out: np.ndarray, k: int, degree: int = 2) -> None:
-    """Write the first and last ``(k-1)/2`` outputs of a uniform LOESS into ``out``."""
+@functools.lru_cache(maxsize=16)
+def _window_weights(k: int, degree: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`loess_kernel` and, for windows whose (c, k) matrix is small, the end rows'
+    weights, computed once per window (a streamed log smooths every block with the same
+    ones); read-only."""
+    kernel = loess_kernel(k, degree)
+    kernel.setflags(write=False)
+    c = (k - 1) // 2
+    if c * k > _CHUNK_ELEMENTS:
+        return kernel, None
+    u, w = _end_geometry(k, np.arange(c))
+    ends = _local_quadratic_rows(u, w, degree)
+    ends.setflags(write=False)
+    return kernel, ends
+
+
+def _apply_ends(y2: np.ndarray, out: np.ndarray, k: int, degree: int = 2,
+                ends: np.ndarray | None = None) -> None:
+    """Write the first and last ``(k-1)/2`` outputs of a uniform LOESS into ``out`` (``ends``:
+    their weights, if known)."""
     c = (k - 1) // 2
     head = y2[:k]
     tail = y2[::-1][:k]
+    if ends is not None:
+        out[:c] = ends @ head
+        out[out.shape[0] - c:] = (ends @ tail)[::-1]
+        return
     # Rows in blocks so that very long windows do not build a (c, k) matrix at once.
     block = max(1, _CHUNK_ELEMENTS // k)
     for start in range(0, c, block):
@@ -316,8 +340,9 @@ def loess(y: np.ndarray, span: float, axis: int = 0, degree: int = 2) -> np.ndar
         return _from_2d(y2.copy(), moved_shape, axis)
     c = (k - 1) // 2
     out = np.empty_like(y2)
-    out[c : n - c] = _interior(y2, loess_kernel(k, degree))
-    _apply_ends(y2, out, k, degree)
+    kernel, ends = _window_weights(k, degree)
+    out[c : n - c] = _interior(y2, kernel)
+    _apply_ends(y2, out, k, degree, ends)
     return _from_2d(out, moved_shape, axis)
 
 
