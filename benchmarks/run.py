@@ -753,12 +753,14 @@ def main() -> None:
     report, report_rows = report_figures(sample_logs, platform_path, long_logs, REPEATS)
     results["report"] = report
 
-    main_fit = fits[minutes]
-    rows = [
-        ("fit / parse, " + f"{minutes:g} min log",
-         f"{main_fit['fit']['wall_s']:.1f} s / {main_fit['parse']['wall_s']:.1f} s",
-         f"{main_fit['fit']['wall_s'] / main_fit['parse']['wall_s']:.2f}×", "≤ 1.2×"),
-    ]
+    rows = []
+    for m in sizes[1:]:  # the main log and the one twice as long (the goal's 60 minutes)
+        f, p = fits[m]["fit"], fits[m]["parse"]
+        med_f, med_p = float(np.median(f["runs_s"])), float(np.median(p["runs_s"]))
+        rows.append((f"fit / parse, {m:g} min log",
+                     f"{f['wall_s']:.1f} s / {p['wall_s']:.1f} s",
+                     f"{f['wall_s'] / p['wall_s']:.2f}× (medians {med_f:.1f} s / {med_p:.1f} s "
+                     f"= {med_f / med_p:.2f}×)", "≤ 1.2×"))
     for m in sizes:
         f = fits[m]["fit"]
         rows.append((f"fit peak RSS, {m:g} min", f"{f['max_rss_mb']:.0f} MB",

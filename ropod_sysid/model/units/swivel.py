@@ -152,7 +152,11 @@ def _b_times_inverse_rows(b: np.ndarray, a: np.ndarray) -> np.ndarray:
     inv01[..., 1, 2] = a02 * a10 - a00 * a12
     det = a00 * inv01[..., 0, 0] + a01 * inv01[..., 1, 0] + a02 * (a10 * a21 - a11 * a20)
     inv01 /= det[..., None, None]
-    return b[..., :, 0, None] * inv01[..., None, 0, :] + b[..., :, 1, None] * inv01[..., None, 1, :]
+    out = np.empty((*a.shape[:-2], b.shape[-2], 3))
+    for i in range(b.shape[-2]):  # written out: broadcasting over the 2 × 3 axes is slow
+        for j in range(3):
+            out[..., i, j] = b[..., i, 0] * inv01[..., 0, j] + b[..., i, 1] * inv01[..., 1, j]
+    return out
 
 
 @dataclass
@@ -516,11 +520,7 @@ class SwivelUnits:
         p = _rot(c_b[:, None], s_b[:, None], self.pivots[None])  # (N, k, 2)
         sp = _turn(p)
         rd_ib = qd[:, None, :2] + w_b * sp
-        a_ib = np.zeros((n, k, 2, 3))
-        a_ib[..., 0, 0] = 1.0
-        a_ib[..., 1, 1] = 1.0
-        a_ib[..., :, 2] = sp
-        b_ib = -(w_b**2) * p
+        b_ib = -(w_b**2) * p  # (a_ib = [I | S p], written out in body_point)
 
         # unit rotation θ̈_i (eqs. 24–26)
         a_theta = np.empty((n, k, 3))
@@ -532,13 +532,27 @@ class SwivelUnits:
 
         def body_point(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             """Velocity and acceleration parametrisation of hub-fixed points r (m, 2) in the
-            unit frame (eqs. 9, 10, 27); shapes (N, k, m, 2), (N, k, m, 2, 3), (N, k, m, 2)."""
-            v = _rot(c_i[..., None], s_i[..., None], r)  # R_i r
-            sv = _turn(v)
-            wi = w_i[..., None]
-            vel = rd_ib[..., None, :] + wi * sv  # (9b)/(10b)
-            a = a_ib[:, :, None] + sv[..., :, None] * a_theta[:, :, None, None, :]  # App. B
-            b = b_ib[:, :, None] + sv * b_theta[..., None, None] - wi**2 * v
+            unit frame (eqs. 9, 10, 27); shapes (N, k, m, 2), (N, k, m, 2, 3), (N, k, m, 2).
+            One point and one component at a time, on (N, k) planes (numpy's broadcasting
+            over the short trailing axes cost three times as much)."""
+            m = r.shape[0]
+            vel, a, b = np.empty((n, k, m, 2)), np.empty((n, k, m, 2, 3)), np.empty((n, k, m, 2))
+            at0, at1, at2 = a_theta[..., 0], a_theta[..., 1], a_theta[..., 2]
+            w2 = theta_i_dot**2
+            for j, (r0, r1) in enumerate(r):
+                v0, v1 = c_i * r0 - s_i * r1, s_i * r0 + c_i * r1  # v = R_i r
+                sv0, sv1 = -v1, v0  # S v
+                vel[:, :, j, 0] = rd_ib[..., 0] + theta_i_dot * sv0  # (9b)/(10b)
+                vel[:, :, j, 1] = rd_ib[..., 1] + theta_i_dot * sv1
+                # App. B: a = [I | S p] + (S v) ⊗ a^θ,  b = b_ib + (S v) b^θ − θ̇_i² v
+                a[:, :, j, 0, 0] = 1.0 + sv0 * at0
+                a[:, :, j, 0, 1] = sv0 * at1
+                a[:, :, j, 0, 2] = sp[..., 0] + sv0 * at2
+                a[:, :, j, 1, 0] = sv1 * at0
+                a[:, :, j, 1, 1] = 1.0 + sv1 * at1
+                a[:, :, j, 1, 2] = sp[..., 1] + sv1 * at2
+                b[:, :, j, 0] = b_ib[..., 0] + sv0 * b_theta - w2 * v0
+                b[:, :, j, 1] = b_ib[..., 1] + sv1 * b_theta - w2 * v1
             return vel, a, b
 
         vel, acc_a, acc_b = body_point(np.vstack([self.r_cm, self.r_wheels]))
@@ -554,7 +568,10 @@ class SwivelUnits:
         # written out (a reduction over an axis of length 2 is slow in numpy)
         cw, sw = c_i[..., None], s_i[..., None]  # (N, k, 1): against the two wheels
         # eq. 30: φ̈ = (e_x·r̈_w + θ̇_i e_y·ṙ_w) / R_w
-        a_phi = (cw[..., None] * a_w[..., 0, :] + sw[..., None] * a_w[..., 1, :]) / self.r_w
+        a_phi = np.empty((n, k, 2, 3))
+        for w in range(2):  # (N, k) planes: see body_point
+            for j in range(3):
+                a_phi[:, :, w, j] = (c_i * a_w[:, :, w, 0, j] + s_i * a_w[:, :, w, 1, j]) / self.r_w
         b_phi = (cw * b_w[..., 0] + sw * b_w[..., 1]
                  + w_i * (cw * rd_w[..., 1] - sw * rd_w[..., 0])) / self.r_w
         wheel_rate = (cw * rd_w[..., 0] + sw * rd_w[..., 1]) / self.r_w  # (11)
@@ -721,10 +738,13 @@ class SwivelUnits:
             fw[...] = -np.einsum("ncuw,nuwf->ncf", b_tau, a_fw)
             fp[...] = -np.einsum("ncu,nuf->ncf", b_tau_fp, a_fp)
         else:
-            np.multiply(b_tau[..., None], a_fw[:, None], out=fw.reshape(n, 3, k, 2, 2))
-            np.negative(fw, out=fw)
-            np.multiply(b_tau_fp[..., None], a_fp[:, None], out=fp.reshape(n, 3, k, 2))
-            np.negative(fp, out=fp)
+            # one (N, k, 2) or (N, k) plane at a time (see pivot_kinematics' body_point)
+            fw5, fp4 = fw.reshape(n, 3, k, 2, 2), fp.reshape(n, 3, k, 2)
+            neg_tau, neg_fp = -b_tau, -b_tau_fp
+            for c in range(3):
+                for f in range(2):
+                    np.multiply(neg_tau[:, c], a_fw[..., f], out=fw5[:, c, :, :, f])
+                    np.multiply(neg_fp[:, c], a_fp[..., f], out=fp4[:, c, :, f])
         return out
 
     # ---------------------------------------------------------------- report / inspect
