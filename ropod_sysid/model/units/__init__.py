@@ -269,6 +269,14 @@ def check_variant(variant: str) -> str:
     return variant
 
 
+def turn(v: np.ndarray) -> np.ndarray:
+    """S v for S = [[0, −1], [1, 0]]: vectors (…, 2) turned by 90°."""
+    out = np.empty(np.shape(v))
+    np.negative(v[..., 1], out=out[..., 0])
+    out[..., 1] = v[..., 0]
+    return out
+
+
 def unit_major(values: np.ndarray, per_unit: int) -> np.ndarray:
     """(N, k·a) → (N, k, a) view of a group's channels."""
     values = np.asarray(values, float)

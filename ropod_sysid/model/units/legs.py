@@ -71,6 +71,7 @@ from ropod_sysid.model.units import (
     check_variant,
     integrated,
     series,
+    turn,
 )
 from ropod_sysid.model.units.entry import unit_name
 from ropod_sysid.model.units.leg_entry import LeggedSpec, parse_leg
@@ -135,11 +136,6 @@ def _with_lead(pred: AnglePrediction, lead: tuple[int, ...]) -> AnglePrediction:
     return AnglePrediction(shaped(pred.angles), shaped(pred.rates), shaped(pred.actuator),  # type: ignore[arg-type]
                            shaped(pred.turning), {k: shaped(v) for k, v in pred.flags.items()},  # type: ignore[misc]
                            shaped(pred.lag))
-
-
-def _turn(v: np.ndarray) -> np.ndarray:
-    """S v: vectors (…, 2) turned by 90°."""
-    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
 
 
 class LeggedUnits:
@@ -350,7 +346,7 @@ class LeggedUnits:
         a, b = self.wheel.constraint_rows(wheel_angles, wheel_rates)
         n = lam.shape[0]
         tb = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-        tb[:, :2, 2] = _turn(lam[:, None] * self.axis)
+        tb[:, :2, 2] = turn(lam[:, None] * self.axis)
         shift = np.zeros((n, 3))
         shift[:, :2] = lam_rate[:, None] * self.axis
         return np.einsum("nrj,nji->nri", a, tb), b - np.einsum("nrj,nj->nr", a, shift)
@@ -559,7 +555,7 @@ class LeggedUnits:
         and extensions λ (V, N), and λ̇ (V, N)."""
         rate = _rate(lam, t)
         tw_l = tw.copy()
-        tw_l[..., :2] += tw[..., 2:3] * _turn((lam - self.leg.middle)[..., None] * self.axis)
+        tw_l[..., :2] += tw[..., 2:3] * turn((lam - self.leg.middle)[..., None] * self.axis)
         tw_l[..., :2] += rate[..., None] * self.axis
         return tw_l, rate
 
@@ -609,10 +605,10 @@ class LeggedUnits:
             wheel_plan = tuple(plan[3:]) or None
         d = lam[:, None] * self.axis
         tw = np.array(twist, float)
-        tw[:, :2] += twist[:, 2:3] * _turn(d) + rate[:, None] * self.axis
+        tw[:, :2] += twist[:, 2:3] * turn(d) + rate[:, None] * self.axis
         twd = np.array(twist_rate, float)
-        twd[:, :2] += (twist_rate[:, 2:3] * _turn(d) + twist[:, 2:3] * rate[:, None]
-                       * _turn(self.axis) + acc[:, None] * self.axis)
+        twd[:, :2] += (twist_rate[:, 2:3] * turn(d) + twist[:, 2:3] * rate[:, None]
+                       * turn(self.axis) + acc[:, None] * self.axis)
         if hasattr(self.wheel, "controller_setpoints"):
             return self.wheel.controller_setpoints(tw, twd, wheel_angles, wheel_plan)
         rates = self.wheel.actuator_rates(np.zeros((tw.shape[0], 3)), tw, wheel_angles)

@@ -46,6 +46,7 @@ from ropod_sysid.model.units import (
     FrictionVariant,
     check_variant,
     swivel_motion,
+    turn,
     unit_major,
 )
 from ropod_sysid.model.units.entry import check_keys, number, resolved, unit_name
@@ -115,14 +116,6 @@ class SwivelSpec:
             if getattr(self, key) != plain:
                 d[key] = getattr(self, key)
         return d
-
-
-def _turn(v: np.ndarray) -> np.ndarray:
-    """S v for S = [[0, −1], [1, 0]] on the last axis."""
-    out = np.empty_like(v)
-    np.negative(v[..., 1], out=out[..., 0])
-    out[..., 1] = v[..., 0]
-    return out
 
 
 def _rot(c: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -518,7 +511,7 @@ class SwivelUnits:
 
         # pivot point P_ib (5a–c): r̈_ib = [I | S p] q̈_b − θ̇_b² p, p = R_b r_ib/b
         p = _rot(c_b[:, None], s_b[:, None], self.pivots[None])  # (N, k, 2)
-        sp = _turn(p)
+        sp = turn(p)
         rd_ib = qd[:, None, :2] + w_b * sp
         b_ib = -(w_b**2) * p  # (a_ib = [I | S p], written out in body_point)
 
