@@ -48,6 +48,7 @@ _WELL_CONDITIONED = 1e-6
 
 # Work arrays of at most about this many float64 elements (32 MiB) in chunked code paths.
 _CHUNK_ELEMENTS = 1 << 22
+_CACHED_END_ELEMENTS = 1 << 18  # end weights kept per window (16 windows: 32 MB at most)
 
 
 # --------------------------------------------------------------------------------------------
@@ -263,13 +264,13 @@ def _overlap_save(y2: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 
 @functools.lru_cache(maxsize=16)
 def _window_weights(k: int, degree: int) -> tuple[np.ndarray, np.ndarray | None]:
-    """:func:`loess_kernel` and, for windows whose (c, k) matrix is small, the end rows'
-    weights, computed once per window (a streamed log smooths every block with the same
-    ones); read-only."""
+    """:func:`loess_kernel` and, for windows whose (c, k) matrix is small (up to 2 MB: k up to
+    about 720), the end rows' weights, computed once per window (a streamed log smooths every
+    block with the same ones); read-only."""
     kernel = loess_kernel(k, degree)
     kernel.setflags(write=False)
     c = (k - 1) // 2
-    if c * k > _CHUNK_ELEMENTS:
+    if c * k > _CACHED_END_ELEMENTS:
         return kernel, None
     u, w = _end_geometry(k, np.arange(c))
     ends = _local_quadratic_rows(u, w, degree)
