@@ -19,7 +19,7 @@ import numpy as np
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import GRID_STEPS, grid_jitter, grid_step, jitter_note, on_grid
-from ropod_sysid.odometry import unwrap_from
+from ropod_sysid.odometry import unwrap_from, wrap_jumps
 
 
 class _OffGrid(Exception):
@@ -90,12 +90,10 @@ class _Grid:
         elif self.has_pose != (log.pose is not None):
             raise InputError(f"{self.source}: the tracker pose is given on part of the log "
                              "only; give x_b, y_b, theta_b on every sample or on none")
-        wrapped = log.layout.wrapped
         angles = np.asarray(log.angles, float)
-        if wrapped.any():
-            angles = angles.copy()
-            angles[:, wrapped], self.unwrap_angles = _unwrap(angles[:, wrapped],
-                                                            self.unwrap_angles)
+        if log.layout.wrapped.any():
+            angles, self.unwrap_angles = _unwrap_columns(
+                angles, np.flatnonzero(log.layout.wrapped), self.unwrap_angles)
         pose = None
         if log.pose is not None:
             theta, self.unwrap_theta = _unwrap(log.pose[:, 2], self.unwrap_theta)
@@ -187,6 +185,26 @@ class _Unwrap:
 
     last: np.ndarray
     corr: np.ndarray
+
+
+def _unwrap_columns(angles: np.ndarray, idx: np.ndarray, state: _Unwrap | None
+                    ) -> tuple[np.ndarray, _Unwrap]:
+    """:func:`_unwrap` of the columns ``idx`` of ``angles`` (m, J). Where none steps by half a
+    turn, the correction carried in is added (the angles themselves come back when it is zero),
+    as :func:`unwrap_from`'s sum of zero steps would."""
+    p = np.take(angles, idx, axis=1)
+    corr = np.zeros(idx.size) if state is None else state.corr
+    if wrap_jumps(p).any() or (state is not None and wrap_jumps(np.stack([state.last, p[0]])
+                                                                ).any()):
+        out = angles.copy()
+        out[:, idx], new = _unwrap(p, state)
+        return out, new
+    new = _Unwrap(p[-1].copy(), corr)
+    if not corr.any():
+        return angles, new
+    out = angles.copy()
+    out[:, idx] = p + corr
+    return out, new
 
 
 def _unwrap(p: np.ndarray, state: _Unwrap | None) -> tuple[np.ndarray, _Unwrap]:

@@ -53,6 +53,12 @@ def base_twist(model: PlatformModel, angles: np.ndarray, rates: np.ndarray) -> n
     return np.einsum("nij,nj->ni", np.linalg.pinv(a), b)
 
 
+def wrap_jumps(p: np.ndarray) -> np.ndarray:
+    """Where consecutive samples (along axis 0) of wrapped angles ``p`` step by half a turn or
+    more: numpy's rule for where :func:`numpy.unwrap` corrects; (N − 1, …) booleans."""
+    return np.abs(np.diff(p, axis=0)) >= np.pi
+
+
 def unwrap_from(p: np.ndarray, corr0: np.ndarray | None = None,
                 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`numpy.unwrap` along axis 0, continued from the correction ``corr0`` that an
@@ -66,7 +72,7 @@ def unwrap_from(p: np.ndarray, corr0: np.ndarray | None = None,
     period = 2 * np.pi
     low, high = -period / 2, period / 2
     dd = np.diff(p, axis=0)
-    jump = np.abs(dd) >= high  # numpy's rule: smaller steps get no correction
+    jump = np.abs(dd) >= high  # numpy's rule (wrap_jumps): smaller steps get no correction
     start = np.zeros_like(p[:1]) if corr0 is None else np.asarray(corr0, float)[None]
     if not jump.any():  # the sum below of zero steps: the start's correction everywhere
         corr = np.repeat(start, p.shape[0], axis=0)
@@ -108,14 +114,30 @@ class OdometryState:
 def unwrap_angles(wrapped: np.ndarray, angles: np.ndarray, corr0: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`unwrap_from` of the channels flagged ``wrapped`` (J,) of ``angles`` (N, J); the
-    others unchanged. Returns the angles and the corrections (N, J) (zero where not wrapped)."""
+    others unchanged. Returns the angles and the corrections (N, J) (zero where not wrapped).
+
+    Where no wrapped channel steps by half a turn (smoothed angles of unwrapped ones, as the
+    fit's), the corrections are the start's on every sample: then they come back as a
+    read-only broadcast of it, and the angles themselves when it is zero.
+    """
     angles = np.asarray(angles, float)
-    corr = np.zeros_like(angles)
+    start = np.zeros(angles.shape[1])
     if not wrapped.any():
-        return angles, corr
+        return angles, np.broadcast_to(start, angles.shape)
+    if corr0 is not None:
+        start[wrapped] = np.asarray(corr0, float)[wrapped]
+    idx = np.flatnonzero(wrapped)
+    sub = np.take(angles, idx, axis=1)
+    if not wrap_jumps(sub).any():  # unwrap_from's sum of zero steps
+        corr = np.broadcast_to(start, angles.shape)
+        if not start.any():
+            return angles, corr
+        out = angles.copy()
+        out[:, idx] = sub + start[idx]
+        return out, corr
     out = angles.copy()
-    c0 = None if corr0 is None else np.asarray(corr0, float)[wrapped]
-    out[:, wrapped], corr[:, wrapped] = unwrap_from(angles[:, wrapped], c0)
+    corr = np.zeros_like(angles)
+    out[:, idx], corr[:, idx] = unwrap_from(sub, start[idx])
     return out, corr
 
 

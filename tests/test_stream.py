@@ -347,3 +347,34 @@ def test_grid_pieces_of_one_sample(runs_off_square, sizes, monkeypatch):
         g.push(late.slice(a, b))
     with pytest.raises(grid._OffGrid):
         g.push(late.slice(int(cuts[-2]), int(cuts[-1])))
+
+
+def test_unwrap_angles_continued_over_pieces():
+    """unwrap_angles over pieces, each continued from the correction the one before ended with,
+    is one np.unwrap of the whole signal, whether a piece has jumps (the cumulative sum), none
+    with a correction carried in (the correction added), or none from zero (the angles
+    themselves); the corrections are the unwrap's minus the signal."""
+    from ropod_sysid.odometry import unwrap_angles
+
+    rng = np.random.default_rng(3)
+    n = 400
+    wrapped = np.array([True, False, False, True])
+    x = np.cumsum(rng.normal(0.0, 0.02, (n, 4)), axis=0)
+    x[:, 3] += 0.1 * np.maximum(np.arange(n) - 250, 0)  # crosses ±π at samples 281 and 344
+    angles = x.copy()
+    angles[:, wrapped] = np.angle(np.exp(1j * x[:, wrapped]))
+    want = angles.copy()
+    want[:, wrapped] = np.unwrap(angles[:, wrapped], axis=0)
+    cuts = [0, 40, 80, 240, 285, 330, n]
+    outs, corrs, corr0, kinds = [], [], None, set()
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        lo = max(a - 1, 0)  # each piece repeats the sample before it, as odometry's pieces do
+        out, corr = unwrap_angles(wrapped, angles[lo:b], None if a == 0 else corr0)
+        kinds.add((np.shares_memory(out, angles), bool(corr.any())))
+        outs.append(out[a - lo:])
+        corrs.append(corr[a - lo:])
+        corr0 = corr[-1]
+    np.testing.assert_array_equal(np.concatenate(outs), want)
+    np.testing.assert_array_equal(np.concatenate(corrs), want - angles)
+    # the angles themselves (no correction), and new ones with a correction (carried or new)
+    assert kinds == {(True, False), (False, True)}
