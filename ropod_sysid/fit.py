@@ -601,7 +601,20 @@ def hold_delay(control_period: float) -> float:
 
 
 def _fit(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
-    """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay."""
+    """Weight, stack and solve the triangles ``reduce(delay)`` gives, choosing the delay.
+
+    With one BLAS thread (:func:`ropod_sysid.chunks.single_thread_blas`), as the reduction
+    has: the solves are of matrices of tens of columns, for which OpenBLAS's threads only wait
+    on each other — numpy's and scipy's each spinning after a call while the other's runs. The
+    delay search's 30 solves on the shipped sample took 44-45 ms with two threads, 11-12 ms
+    with one."""
+    from ropod_sysid.chunks import single_thread_blas
+
+    with single_thread_blas():
+        return _fit_blas(reduce, platform, options)
+
+
+def _fit_blas(reduce: Reduce, platform: Platform, options: FitOptions) -> FitResult:
     model = PlatformModel(platform)
     names = model.parameter_names(options.friction)
     check_fixed(options.fix, names)  # before the logs are read

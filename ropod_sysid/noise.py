@@ -207,13 +207,14 @@ def measured_rate_channels(model: object, st: object, qdd: np.ndarray,
     q, qd, ang = st.q[:few], st.qd[:few], st.angles[:few]  # type: ignore[attr-defined]
     rates = st.angle_rate[:few]  # type: ignore[attr-defined]
     base = model.a_id_ext(model.state(q, qd, ang, rates), qdd[:few], friction)  # type: ignore[attr-defined]
-    out = []
-    for j in range(rates.shape[1]):
-        moved = rates.copy()
-        moved[:, j] += 1.0
-        if np.any(model.a_id_ext(model.state(q, qd, ang, moved), qdd[:few], friction) != base):  # type: ignore[attr-defined]
-            out.append(j)
-    return out
+    j = rates.shape[1]
+    moved = np.tile(rates, (j, 1)).reshape(j, few, j)  # each channel's rate moved, stacked
+    moved[np.arange(j), :, np.arange(j)] += 1.0
+    a = model.a_id_ext(model.state(np.tile(q, (j, 1)), np.tile(qd, (j, 1)),  # type: ignore[attr-defined]
+                                   np.tile(ang, (j, 1)), moved.reshape(j * few, j)),
+                       np.tile(qdd[:few], (j, 1)), friction)
+    changed = (a.reshape(j, few, -1) != base.reshape(1, few, -1)).any(axis=(1, 2))
+    return np.flatnonzero(changed).tolist()
 
 
 def row_variances(model: object, rows: object, params: object, noise: SensorNoise,
@@ -394,15 +395,15 @@ def _turning_channels(model: object, angles: np.ndarray, rates: np.ndarray) -> n
     from ropod_sysid.odometry import constraint_system
 
     few = min(8, angles.shape[0])
+    j = angles.shape[1]
     base = constraint_system(model, angles[:few], rates[:few])  # type: ignore[arg-type]
-    out = []
-    for c in range(angles.shape[1]):
-        moved = angles[:few].copy()
-        moved[:, c] += 0.1
-        new = constraint_system(model, moved, rates[:few])  # type: ignore[arg-type]
-        if any(np.any(x != y) for x, y in zip(base, new, strict=True)):
-            out.append(c)
-    return np.array(out, int)
+    moved = np.tile(angles[:few], (j, 1)).reshape(j, few, j)  # each channel moved, stacked
+    moved[np.arange(j), :, np.arange(j)] += 0.1
+    new = constraint_system(model, moved.reshape(j * few, j), np.tile(rates[:few], (j, 1)))  # type: ignore[arg-type]
+    changed = np.zeros(j, bool)
+    for x, y in zip(base, new, strict=True):
+        changed |= (y.reshape(j, few, -1) != x.reshape(1, few, -1)).any(axis=(1, 2))
+    return np.flatnonzero(changed)
 
 
 def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.ndarray,
@@ -555,30 +556,36 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
     qd_m = p_v @ m  # (N, D, J): δq̇ after the consistent motion's projection
     t_map = np.zeros((n, 3 + len(used), j))  # the rate errors' moves along the directions
     t_map[:, :3] = qd_m[:, :3]
-    da, dc = [], []
-    for i in range(3 + len(used)):
-        qd_i, rates_i = st.qd.copy(), st.angle_rate.copy()  # type: ignore[attr-defined]
+    # every direction's state at once: the model evaluated on (3 + I)·N stacked rows
+    n_dir = 3 + len(used)
+    qd_s = np.tile(st.qd, (n_dir, 1))  # type: ignore[attr-defined]
+    rates_s = np.tile(st.angle_rate, (n_dir, 1))  # type: ignore[attr-defined]
+    for i in range(n_dir):
+        rows_i = slice(i * n, (i + 1) * n)
         if i < 3:
-            qd_i[:, i] += h
+            qd_s[rows_i, i] += h
         else:
             ch = used[i - 3]
-            rates_i[:, ch] += h
+            rates_s[rows_i, ch] += h
             where = np.flatnonzero(own == ch)
             if where.size:
                 t_map[:, i] = qd_m[:, 3 + where[0]]
             else:
                 t_map[:, i, ch] = 1.0
-        st_i = model.state(st.q, qd_i, st.angles, rates_i)  # type: ignore[attr-defined]
-        da.append((model.a_id_ext(st_i, qdd, friction, projected=False) - a_c) / h)  # type: ignore[attr-defined]
-        if con is not None:
-            dc.append((model.constraints(st_i)[1] - c_c) / h)  # type: ignore[attr-defined]
+    st_s = model.state(np.tile(st.q, (n_dir, 1)), qd_s, np.tile(st.angles, (n_dir, 1)),  # type: ignore[attr-defined]
+                       rates_s)
+    a_s = model.a_id_ext(st_s, np.tile(qdd, (n_dir, 1)), friction, projected=False)  # type: ignore[attr-defined]
+    da = np.moveaxis((a_s.reshape(n_dir, *a_c.shape) - a_c) / h, 0, 1)  # (N, I, D, p)
+    if con is not None:
+        c_s = model.constraints(st_s)[1]  # type: ignore[attr-defined]
+        dc = np.moveaxis((c_s.reshape(n_dir, *c_c.shape) - c_c) / h, 0, -1)  # (N, C, I)
     proj = model.identification_projector(st)  # type: ignore[attr-defined]
-    da_all = np.concatenate([a_k, np.stack(da, axis=1)], axis=1)  # (N, D + I, D, p)
+    da_all = np.concatenate([a_k, da], axis=1)  # (N, D + I, D, p)
     if proj is not None:
         da_all = proj[:, None] @ da_all
     dqdd_v = p_a @ k
     if con is not None:
-        dqdd_v = dqdd_v - g_pinv @ (np.stack(dc, axis=-1) @ t_map)
+        dqdd_v = dqdd_v - g_pinv @ (dc @ t_map)
     # the sources' coefficients on A's terms: (N, D + I, 2J), rate errors then acceleration
     coef = np.concatenate([np.concatenate([dqdd_v, p_a @ m], axis=2),
                            np.concatenate([t_map, np.zeros_like(t_map)], axis=2)], axis=1)
