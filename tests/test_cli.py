@@ -294,3 +294,34 @@ def test_console_script_exits_with_the_commands_status_and_flushed_output(tmp_pa
                          capture_output=True, text=True, timeout=60)
     assert ran.returncode == 0 and ran.stdout.startswith("ropod-sysid, version ")
     assert marker.exists()
+
+
+def test_console_script_runs_one_blas_thread_unless_told():
+    """The console script limits the BLAS libraries to one thread, those loaded before it runs
+    (numpy's) and after (scipy's, through the environment children inherit), unless the user
+    set a BLAS thread variable: then it changes nothing."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    probe = ("import json, os, sys; from ropod_sysid.cli.main import _one_blas_thread; "
+             "_one_blas_thread(); import scipy.linalg; "
+             "from threadpoolctl import threadpool_info; "
+             "print(json.dumps([os.environ.get('OPENBLAS_NUM_THREADS'), "
+             "sorted({i['num_threads'] for i in threadpool_info() "
+             "if i['user_api'] == 'blas'})]))")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+                        "BLIS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")}
+
+    def threads(extra: dict[str, str], limit: bool = True) -> list:
+        code = probe if limit else probe.replace("_one_blas_thread(); ", "")
+        out = subprocess.run([sys.executable, "-c", code], env={**env, **extra},
+                             capture_output=True, text=True, timeout=60, check=True)
+        return json.loads(out.stdout)
+
+    assert threads({}) == ["1", [1]]
+    told = {"OMP_NUM_THREADS": "2"}
+    assert threads(told) == threads(told, limit=False)
+    assert threads(told)[0] is None
