@@ -11,7 +11,9 @@ command runs in its own process, best of three wall times:
   apart, exact interpolation);
 - four 20 s runs at 1 kHz simulated with ``ropod-sysid simulate`` from ``ropod-sysid
   trajectory typical`` (2¹⁴-count encoders, 30 mA current noise; nodes every 5 samples,
-  cubic interpolation), cached in ``benchmarks/out/delay/`` (``--fresh`` simulates again).
+  cubic interpolation), cached in ``benchmarks/out/delay/`` (``--fresh`` simulates again);
+- a long log: ``benchmarks/run.py``'s 10-minute 1 kHz log (its 60 s run ten times), if that
+  benchmark has written it (the search's gram grows with the log, the rest of the fit too).
 
 Prints the table and the delays found.
 """
@@ -64,8 +66,8 @@ def fast_logs(fresh: bool) -> list[Path]:
     return logs
 
 
-def measure(label: str, logs: list[Path]) -> tuple[str, float, float, float]:
-    platform = ROOT / "datasets" / "ropod" / "platform.yaml"
+def measure(label: str, logs: list[Path], platform: Path = ROOT / "datasets" / "ropod" /
+            "platform.yaml") -> tuple[str, float, float, float]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "p.json"
         base = ["fit", *map(str, logs), "--platform", str(platform), "--out", str(out)]
@@ -82,6 +84,12 @@ def main() -> None:
     rows = [measure("shipped sample, 4 × 60 s at 100 Hz",
                     sorted((ROOT / "datasets" / "ropod").glob("*.csv.gz"))),
             measure("4 × 20 s at 1 kHz", fast_logs(args.fresh))]
+    long_log = HERE / "out" / "log_10min.csv"
+    if long_log.exists():
+        rows.append(measure("10 min at 1 kHz (benchmarks/run.py's)", [long_log],
+                            HERE / "out" / "platform.yaml"))
+    else:
+        print(f"({long_log} not found: run benchmarks/run.py for the long log's row)")
     print(f"{'logs':<38} {'fit [s]':>8} {'auto [s]':>9} {'ratio':>6} {'goal':>6} delay")
     for label, plain, auto, delay in rows:
         print(f"{label:<38} {plain:>8.2f} {auto:>9.2f} {auto / plain:>5.2f}× {'≤ 1.5×':>6} "

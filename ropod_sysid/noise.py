@@ -79,6 +79,7 @@ class SensorNoise:
         local quartic and five-point differences
     jitter : half-width of a uniform jitter of the sample instants [samples]
         (:func:`ropod_sysid.io.timebase.grid_jitter`; for :func:`tone_share`)
+    tone_nodes : :func:`tone_share`'s nodes per lag (None: :func:`tone_nodes` of the kernel)
     """
 
     current_noise: float = 0.03
@@ -88,6 +89,7 @@ class SensorNoise:
     row_step: int | None = None
     degree: int = 2
     jitter: float = 0.0
+    tone_nodes: int | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.current_noise) and self.current_noise >= 0):
@@ -181,7 +183,7 @@ def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int,
     if window_motion is not None:
         rate, accel = window_motion
         return white * tone_share(full, rate * noise.dt / step, accel * noise.dt**2 / step,
-                                  noise.jitter)
+                                  noise.jitter, noise.tone_nodes)
     cps = np.abs(rates) * noise.dt / step
     return white * sawtooth_share(full, cps)
 
@@ -339,33 +341,46 @@ def gram_stride(span_rows: int) -> int:
 
 
 # the delay search's gram of counts detected in a log (not given): on every this-many-th of the
-# rows the fit's gram uses (search_gram_stride)
+# rows the fit's gram uses (search_gram_stride) ...
 SEARCH_GRAM_SPARSER = 4
+# ... for a log's first this-many gram rows, then on every SEARCH_GRAM_LATER-th of those
+SEARCH_GRAM_DENSE = 2000
+SEARCH_GRAM_LATER = 4
+# ... and with tone_share's nodes per lag this many (the fit's: tone_nodes of the kernel)
+SEARCH_TONE_NODES: int | None = 1
 
 
 def search_gram_stride(span_rows: int) -> int:
     """Every how many equation rows the delay search (``--input-delay auto`` without
     ``--encoder-counts``) evaluates the error gram of the counts it detected in a log
     (:func:`detect_encoder_counts`): :data:`SEARCH_GRAM_SPARSER` × :func:`gram_stride`, about
-    one row per smoother span. The search's criterion needs E only where it moves the
-    residual with the delay, and the fit at the delay found is not corrected. Measured against
-    ``--encoder-counts 16384`` (the fit's stride): the delay found within 0.02 ms on the
-    shipped ropod, omni, steered and legs samples (ropod +0.47 against +0.46 ms; at strides
-    1–14 of its 11-row spans 0.45–0.48 ms) and on ``benchmarks/bias.py``'s off-square runs at
-    100 / 200 / 1000 Hz, unshifted and shifted 5 ms, four logs and one; sparser (6×, 8×) the
-    1 kHz runs below jump. The gram takes a quarter of the fit's time (the shipped sample:
-    0.28 s for the four logs, against 1.2 s), which keeps ``--input-delay auto`` near 1.5× a
-    plain fit there (``benchmarks/delay.py``). Where the corrected residual is nearly all the
-    encoders' share (``benchmarks/delay.py``'s 1 kHz runs: ρ² at the best node 1/1.9 and 1/23
-    of its neighbours') the criterion hangs on E's last percent, and the delay found moves
-    between −2.4 and +2.5 ms with the stride, the fit's own (−2.30 ms) and every row
-    (−2.13 ms) included; here −2.32 ms."""
+    one row per smoother span, for the first :data:`SEARCH_GRAM_DENSE` gram rows of a log (4
+    minutes at 1 kHz or at the shipped sample's 100 Hz), then :data:`SEARCH_GRAM_LATER` times
+    sparser (:func:`fit_error_gram`'s ``sparse_after``), each with :data:`SEARCH_TONE_NODES`
+    node per lag in :func:`tone_share`. The search's criterion needs E only where it moves the
+    residual with the delay, and the fit at the delay found is not corrected.
+
+    Measured against ``--encoder-counts 16384`` (the fit's stride and nodes): the delay found
+    within 0.02 ms on the shipped ropod, omni, steered and legs samples and on
+    ``benchmarks/bias.py``'s off-square runs at 100 / 200 / 1000 Hz, unshifted and shifted
+    5 ms (``--part delay``: +0.38 / +0.49 / +0.46 and +5.26 / +5.49 / +5.46 ms against +0.39 /
+    +0.50 / +0.47 and +5.27 / +5.50 / +5.47 ms; with the fit's nodes here +0.40 / +0.50 /
+    +0.46 and +5.28 / +5.50 / +5.46 ms); on ``benchmarks/run.py``'s 10-minute 1 kHz log
+    +0.330 ms with one node (+0.340 ms with the kernel's three), +0.322 and +0.345 ms with
+    every row 2× and 4× sparser. One node per lag took the search's gram on that log from
+    0.84 to 0.50 CPU-s (at 1 kHz :func:`tone_share` was 62 % of it), the later rows' sparser
+    stride 0.50 to about 0.3. Where the corrected residual is nearly all the encoders' share
+    (``benchmarks/delay.py``'s 1 kHz runs: ρ² at the best node 1/1.9 and 1/23 of its
+    neighbours') the criterion hangs on E's last percent, and the delay found moves by tenths
+    of a millisecond and more with the stride and nodes: there +1.60 ms with the kernel's
+    nodes, +1.75 ms with one."""
     return SEARCH_GRAM_SPARSER * gram_stride(span_rows)
 
 
 def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts: int,
                    friction: str = "per-wheel", first_row: int = 0,
-                   stride: int | None = None) -> np.ndarray:
+                   stride: int | None = None, tone_nodes: int | None = None,
+                   sparse_after: int | None = None) -> np.ndarray:
     """E[δAᵀδA] (3, p, p) of the equation rows at samples ``index`` of a preprocessed block
     ``pre`` (:class:`ropod_sysid.regressor.Preprocessed`) for encoders of ``encoder_counts``
     per revolution: what ``fit --encoder-counts`` subtracts from the normal equations
@@ -373,20 +388,27 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     (:func:`recipe_error_gram`) at every ``stride``-th row of the log (default
     :func:`gram_stride` of the rows' span; ``first_row``: the log's row number of
     ``index[0]``, so that blocks streamed in chunks pick the rows of the whole log), each
-    weighted ``stride``; each channel's quantisation error as the sawtooth of its motion
-    through the row's window (:func:`tone_share`, :func:`window_motion`)."""
+    weighted ``stride``; from the log's row ``sparse_after`` on (None: never) at every
+    :data:`SEARCH_GRAM_LATER` × ``stride``-th row, each weighted so; each channel's
+    quantisation error as the sawtooth of its motion through the row's window
+    (:func:`tone_share`, :func:`window_motion`); ``tone_nodes``: :class:`SensorNoise`'s."""
     noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
                         row_step=pre.grid.step, degree=pre.degree,  # type: ignore[attr-defined]
-                        jitter=float(getattr(pre, "jitter", 0.0)))
+                        jitter=float(getattr(pre, "jitter", 0.0)), tone_nodes=tone_nodes)
     index = np.asarray(index)
     stride = gram_stride(pre.grid.span) if stride is None else max(1, int(stride))  # type: ignore[attr-defined]
-    index = index[(first_row + np.arange(index.size)) % stride == stride // 2]
-    if index.size == 0:
-        p = len(model.parameter_names(friction))  # type: ignore[attr-defined]
-        return np.zeros((3, p, p))
-    gram, _ = recipe_error_gram(model, pre.take(index), noise, friction,  # type: ignore[attr-defined]
-                                motion=window_motion(pre, index))
-    return kind_grams(gram) * float(stride)
+    row = first_row + np.arange(index.size)
+    later = np.zeros(index.size, bool) if sparse_after is None else row >= sparse_after
+    sparse = SEARCH_GRAM_LATER * stride
+    p = len(model.parameter_names(friction))  # type: ignore[attr-defined]
+    out = np.zeros((3, p, p))
+    for rows, every, shift in ((~later, stride, 0), (later, sparse, sparse_after or 0)):
+        at = index[rows & ((row - shift) % every == every // 2)]
+        if at.size:
+            gram, _ = recipe_error_gram(model, pre.take(at), noise, friction,  # type: ignore[attr-defined]
+                                        motion=window_motion(pre, at))
+            out += kind_grams(gram) * float(every)
+    return out
 
 
 def _turning_channels(model: object, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:

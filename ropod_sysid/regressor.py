@@ -653,10 +653,19 @@ def add_error_gram(block: Triangles, model: PlatformModel, pre: Preprocessed,
     counts = encoder_counts or search_counts
     if not counts:
         return
-    from ropod_sysid.noise import fit_error_gram, search_gram_stride
+    from ropod_sysid.noise import (
+        SEARCH_GRAM_DENSE,
+        SEARCH_TONE_NODES,
+        fit_error_gram,
+        search_gram_stride,
+    )
 
-    stride = None if encoder_counts else search_gram_stride(pre.grid.span)
-    block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row, stride)
+    if encoder_counts:
+        block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row)
+    else:
+        stride = search_gram_stride(pre.grid.span)
+        block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row,
+                                          stride, SEARCH_TONE_NODES, SEARCH_GRAM_DENSE * stride)
     block.error_counts = counts
 
 

@@ -219,10 +219,11 @@ def test_where_the_corrected_cost_is_fragile_the_delay_is_a_fixed_point(monkeypa
 def test_delay_search_on_quantised_logs_corrects_for_the_detected_counts(off_square,
                                                                          runs_off_square_noisy):
     """Without --encoder-counts the encoders' errors in A moved the delay found later (on this
-    run +1.34 ms, and +6.34 ms for currents shifted by 5 ms; −0.03 and +4.97 ms with the
+    run +1.34 ms, and +6.34 ms for currents shifted by 5 ms; −0.011 and +4.989 ms with the
     counts): the search now forms the gram of the counts the angles move by and finds what
-    --encoder-counts finds (−0.02, +4.98 ms). The fit at that delay stays plain, as asked,
-    and the notes say what the search did; the stream forms the same gram as the whole log."""
+    --encoder-counts finds (−0.016, +4.984 ms, with the search's sparser gram). The fit at
+    that delay stays plain, as asked, and the notes say what the search did; the stream forms
+    the same gram as the whole log."""
     log = runs_off_square_noisy[0]
     found = []
     for shift in (0.0, 0.005):
