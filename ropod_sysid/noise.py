@@ -347,7 +347,7 @@ SEARCH_GRAM_SPARSER = 4
 SEARCH_GRAM_DENSE = 2000
 SEARCH_GRAM_LATER = 4
 # ... and with tone_share's nodes per lag this many (the fit's: tone_nodes of the kernel)
-SEARCH_TONE_NODES: int | None = 1
+SEARCH_TONE_NODES = 1
 
 
 def search_gram_stride(span_rows: int) -> int:
