@@ -88,7 +88,8 @@ class LazyGroup(click.Group):
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="ropod-sysid")
 def main() -> None:
-    """Identify the dynamic parameters of swivel-wheeled robots (ropod) from their logs."""
+    """Identify the dynamic parameters of wheeled mobile robots (swivel, steered, omni and legged
+    wheel units; first the ropod) from their logs."""
 
 
 def run() -> None:

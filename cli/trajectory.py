@@ -256,7 +256,7 @@ def typical_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
             click.echo(note)
 
 
-@command.command("optimize", short_help="An optimised run (Fourier series, min. condition).")
+@command.command("optimize", short_help="An optimised run (Fourier series, least predicted σ).")
 @limit_options
 @click.option("--platform", "platform_path", required=True, type=INPUT,
               help="Platform YAML (unit types and geometry for the regressor and the "

@@ -1,4 +1,4 @@
-"""ropod-sysid: identify the dynamic parameters of swivel-wheeled mobile robots from their logs.
+"""ropod-sysid: identify the dynamic parameters of wheeled mobile robots from their logs.
 
 The library follows the modular model of R.M. Beumer (MSc thesis, TU Eindhoven, 2021): the
 platform base is the central body and every smart-wheel unit adds its contribution to the direct
