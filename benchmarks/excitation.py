@@ -14,7 +14,9 @@ count); fits every seed and prints, per inertial parameter, the predicted σ and
 fitted σ, the mean and RMS error over the seeds and the share of seeds whose error is within 2
 predicted σ of the predicted bias, and the same of fits with ``--encoder-counts`` (corrected
 for the encoders' errors in A); then the ratios of the typical run's σ and errors to the
-optimised run's (goal: at least 2×) and the optimiser's time.
+optimised run's (goal: at least 2×, judged on the corrected fits, whose σ match their errors:
+the plain fits' jackknife σ also carry the encoders' errors in A, which vary from stretch to
+stretch) and the optimiser's time.
 """
 
 
@@ -116,8 +118,16 @@ def main() -> None:
     rc_err = np.sqrt((ec_t[:, inert] ** 2).mean(axis=0) / (ec_o[:, inert] ** 2).mean(axis=0))
     print("with --encoder-counts: fitted σ " + " ".join(f"{x:.2f}" for x in rc_fit)
           + "; RMS error " + " ".join(f"{x:.2f}" for x in rc_err))
-    print(f"smallest fitted-σ ratio {ratio_fit.min():.2f} (goal ≥ 2); optimize took "
-          f"{t_opt:.1f} s ({opt.evaluations} candidates)")
+    # the goal (issue 14): the optimised run's inertial σ at least 2× smaller. The plain fits'
+    # jackknife σ carries the encoders' errors in A stretch by stretch (an error common to
+    # the run, not noise), far above their own errors on the optimised run; the corrected
+    # fits' σ are their errors' (the tables above), so the goal is judged on those.
+    over = st_o[:, inert].mean(axis=0) / np.sqrt((er_o[:, inert] ** 2).mean(axis=0))
+    print(f"goal ≥ 2: with --encoder-counts the smallest fitted-σ ratio is {rc_fit.min():.2f}"
+          f" ({'met' if rc_fit.min() >= 2 else 'NOT met'}; RMS error ratios "
+          f"{rc_err.min():.2f}–{rc_err.max():.2f}); plain fits {ratio_fit.min():.2f}, their "
+          f"σ {over.min():.1f}–{over.max():.1f}× their RMS error on the optimised run")
+    print(f"optimize took {t_opt:.1f} s ({opt.evaluations} candidates)")
 
 
 if __name__ == "__main__":

@@ -284,8 +284,8 @@ def counts_note(source: str, detected: int | None, given: int | None,
     (:func:`detect_encoder_counts`) when the fit was not told them, or was told others.
     ``constrained``: a platform whose constraint forces the fit projects out (steered wheels,
     legs), where the correction was measured to over-correct on three of four simulated
-    platforms (README). (What ``--input-delay auto`` did with the counts is the search's own
-    note: :func:`ropod_sysid.delay.search_counts_note`.)"""
+    platforms (docs/accuracy.md). (What ``--input-delay auto`` did with the counts is the
+    search's own note: :func:`ropod_sysid.delay.search_counts_note`.)"""
     if detected is None or detected == given:
         return None
     if given is None:
