@@ -42,6 +42,7 @@ sys.path.insert(0, str(HERE))
 
 from excitation import quantised  # noqa: E402
 from run import OFF_SQUARE, setpoints  # noqa: E402
+from stops import tile  # noqa: E402
 
 from ropod_sysid.fit import FitOptions, fit_logs  # noqa: E402
 from ropod_sysid.params import parameter_names, thesis_fixed_masses  # noqa: E402
@@ -63,20 +64,6 @@ OPTIONS = {
 }
 
 
-def joined(logs: list, exact) -> object:
-    """The copies ``logs`` (one run's recordings) as one log: t and the angles continued by the
-    exact run's motion from its first to its last sample (the pivots by whole turns)."""
-    dt = float(np.median(np.diff(exact.t)))
-    period = exact.t[-1] - exact.t[0] + dt
-    shift = exact.angles[-1] - exact.angles[0]
-    w = exact.layout.wrapped
-    shift[w] = 2 * np.pi * np.round(shift[w] / (2 * np.pi))
-    return dataclasses.replace(
-        logs[0], t=np.concatenate([lg.t + k * period for k, lg in enumerate(logs)]),
-        angles=np.concatenate([lg.angles + k * shift for k, lg in enumerate(logs)]),
-        currents=np.concatenate([lg.currents for lg in logs]), source="joined")
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--copies", type=int, default=10)
@@ -95,7 +82,7 @@ def main() -> None:
         rng = np.random.default_rng(2000 + k)
         rec = record(pf, run, exact.t, Sensors(current_noise=CURRENT_NOISE), rng, f"copy{k}")
         copies.append(quantised(rec, COUNTS, rng))
-    long = joined(copies, exact)
+    long = dataclasses.replace(tile(exact, len(copies), copies), source="joined")
 
     def row(label: str, fit) -> None:
         sol = fit.solution
@@ -118,7 +105,8 @@ def main() -> None:
         for lg in copies:
             sol = fit_logs([lg], pf, opts).solution
             each.append(np.mean(np.abs(sol.values - ref) < 2 * sol.std))
-        print(f"  {'each copy alone':<22} {100 * min(each):3.0f}–{100 * max(each):.0f} %")
+        print(f"  {'each copy alone':<22} {100 * min(each):3.0f}–{100 * max(each):.0f} % "
+              f"(mean {100 * np.mean(each):.0f} %)")
         row("separate logs", fit_logs(copies, pf, opts))
         row("joined", fit_logs([long], pf, opts))
     print(f"({time.perf_counter() - t0:.0f} s)")

@@ -59,18 +59,21 @@ from ropod_sysid.platform import ropod_platform  # noqa: E402
 from ropod_sysid.simulate import Setpoints, simulate  # noqa: E402
 
 
-def tile(log, copies: int):
-    """``copies`` repetitions of ``log`` as one log, continued across the seams."""
+def tile(log, copies: int, recordings: list | None = None):
+    """``copies`` repetitions of ``log`` as one log, continued across the seams (t, the wheel
+    angles by the run's motion from its first to its last sample, the pivots by whole turns);
+    ``recordings``: the copies' own recordings of the run (sensor effects of their own) in
+    place of ``log`` itself."""
+    recs = [log] * copies if recordings is None else recordings
     dt = float(np.median(np.diff(log.t)))
     period = log.t[-1] - log.t[0] + dt
-    a = log.angles
-    shift = a[-1] - a[0]
+    shift = log.angles[-1] - log.angles[0]
     w = log.layout.wrapped
     shift[w] = 2 * np.pi * np.round(shift[w] / (2 * np.pi))
     return dataclasses.replace(
-        log, t=np.concatenate([log.t + k * period for k in range(copies)]),
-        angles=np.concatenate([a + k * shift for k in range(copies)]),
-        currents=np.concatenate([log.currents] * copies))
+        recs[0], t=np.concatenate([r.t + k * period for k, r in enumerate(recs)]),
+        angles=np.concatenate([r.angles + k * shift for k, r in enumerate(recs)]),
+        currents=np.concatenate([r.currents for r in recs]))
 
 
 def cut(log, start: int, stop: int | None = None):
