@@ -35,7 +35,7 @@ def identifiability_verdict(result: FitResult) -> str:
     if sol.rank < free:
         return (f"rank deficient: {free - sol.rank} parameter combination(s) cannot be "
                 f"separated by these logs; {int(sol.combination.sum())} values are determined "
-                "only in combination (see the null space)")
+                f"only in combination (see the null space){_loess_caveat(result)}")
     rel = relative_std(result)
     worst = int(np.nanargmax(rel)) if np.any(np.isfinite(rel)) else 0
     if sol.condition_number > 1e4 or rel[worst] > 0.2:
@@ -62,7 +62,8 @@ LOESS_CAVEAT_STD = 0.02
 
 
 def _loess_caveat(result: FitResult) -> str:
-    """The caveat of a "well determined" verdict whose σ has grown small enough that the
+    """The caveat of a "well determined" (or rank-deficient) verdict whose σ has grown small
+    enough that the
     LOESS's discretisation bias (:data:`LOESS_CAVEAT_STD`) may exceed it, where the quartic
     smoother is an option (every log's span at least
     :data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES` samples)."""

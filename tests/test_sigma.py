@@ -115,8 +115,8 @@ def test_verdict_says_when_model_error_dominates(off_square, runs_off_square,
     assert "std: jackknife over 16 stretches of 2 s" in format_fit(exact)
 
 
-def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square,
-                                                                runs_off_square_noisy):
+def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square, runs_off_square_noisy,
+                                                                runs_square):
     """A "well determined" LOESS fit whose inertial σ fall under 2 % (a long log's) says that σ
     may not cover the LOESS's discretisation bias and names the quartic; not at larger σ, not
     with the quartic, not where the span is under the quartic's 17 samples."""
@@ -145,6 +145,12 @@ def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square,
     assert "LOESS" not in identifiability_verdict(quartic)
     counted = dataclasses.replace(small, options=FitOptions(encoder_counts=2**14))
     assert identifiability_verdict(counted).endswith("--input-delay auto removes most of it")
+    # the symmetric ropod's identifiable combinations (rank deficient) alike
+    square = fit_logs([r.log for r in runs_square], ropod_platform())
+    rel = np.abs(square.solution.std / square.solution.values)
+    ok = np.isfinite(rel) & (rel > 0)
+    deficient = identifiability_verdict(scaled(square, 0.015 / rel[ok][:5].min()))
+    assert deficient.startswith("rank deficient") and deficient.endswith("; " + caveat)
 
 
 def test_physical_fit_has_its_own_std_and_marks_bounds(off_square, runs_off_square):
