@@ -150,8 +150,10 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               show_default=True,
               help="How the angles are smoothed and differentiated: loess (MATLAB's local "
                    "quadratic, three-point differences) or quartic (a local quartic, five-point "
-                   "differences: less discretisation bias on clean, fast logs, about 1.6× the "
-                   "σ on noisy ones at the same span).")
+                   "differences: less discretisation bias, for spans of 17 samples or more; "
+                   "on quantised angles with --encoder-counts, which it needs: without, about "
+                   "1.6× the σ at the same span). On long 1 kHz logs its σ cover the truth "
+                   "where the loess's bias outgrows them.")
 @click.option("--row-step", default="auto", show_default=True, metavar="N|auto",
               help="Form an equation row every N samples (at most one span); auto: about ten "
                    "per span (every 10th sample at 1 kHz with 0.1s, every sample at 100 Hz). "
