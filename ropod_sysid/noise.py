@@ -648,6 +648,7 @@ def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
         x = np.moveaxis(w, 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
         gram += np.swapaxes(x, 1, 2) @ x
         if var is not None:
+            assert truth is not None  # var is None without truth
             var[k:k + chunk] = (np.einsum("nsdp,p->nsd", w, truth) ** 2).sum(axis=1)
     return gram, var
 
