@@ -11,7 +11,7 @@ import sys
 import warnings
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import click
 from click.core import ParameterSource
@@ -106,7 +106,8 @@ class InputFile(click.Path):
 
     def convert(self, value: Any, param: click.Parameter | None,
                 ctx: click.Context | None) -> Any:
-        path = super().convert(value, param, ctx)
+        # the argument as given (no path_type converts it): the command line's str
+        path = cast(str, super().convert(value, param, ctx))
         try:
             mode = os.stat(path).st_mode
         except OSError:

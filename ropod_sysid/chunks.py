@@ -16,6 +16,7 @@ import queue
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from threadpoolctl import threadpool_limits
 
@@ -23,6 +24,9 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.io.timebase import Gaps, TimeBase, checked_chunks
 from ropod_sysid.platform import Platform
+
+if TYPE_CHECKING:
+    from ropod_sysid.model import PlatformModel
 
 DEFAULT_CHUNK = 30_000  # samples per chunk read and per block (25–30k measured fastest)
 Source = str | Path | Log
@@ -88,7 +92,7 @@ def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
             return checked_chunks(_iter_log(source, chunk), TimeBase(source.source, gaps=gaps))
         return _iter_path(Path(source), platform, chunk, gaps)
 
-    def model() -> object:
+    def model() -> PlatformModel:
         from ropod_sysid.model import PlatformModel
 
         return PlatformModel(platform)

@@ -450,7 +450,7 @@ def corrected_triangle(systems: Sequence[Triangles], weights: Sequence[float]) -
         return int(np.count_nonzero(lam > RCOND**2 * lam.max()))
 
     before = rank(gram)
-    err = sum(grams) / np.outer(d, d)  # type: ignore[operator]
+    err = sum(grams) / np.outer(d, d)  # type: ignore[arg-type]  # (no None: returned above)
     # only where the data determine a direction well above the encoders' error in it: in a
     # direction the motion barely excites (a symmetric layout's friction difference) E would
     # outweigh AᵀA and the corrected equations would lose it
@@ -526,8 +526,8 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
         logs = [p for log in logs for p in usable_pieces(log, options.span, options.row_step)]
 
     def reduce(delay: float | DelayBracket, _plot: bool,
-               ) -> list[tuple[str, Triangles, list[str], None]]:
-        out = []
+               ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
+        out: list[tuple[str, Triangles, list[str], LogPlot | None]] = []
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)

@@ -220,6 +220,7 @@ def _base_velocity(log: Log, model: PlatformModel, t: np.ndarray, dt_med: float,
     if model.constrained:
         st = model.state(np.zeros((t.size, 3)), vel, angles, rates)
         proj = model.identification_projector(st)
+        assert proj is not None  # constrained
         used = np.abs(proj[:, :3, :3]).max(axis=(1, 2)) > 0.5
     return vel, moving, np.gradient(t), used
 
@@ -233,6 +234,7 @@ def _sideways_singular(model: PlatformModel) -> bool:
     angles = model.initial_angles(twist)[None]
     st = model.state(np.zeros((1, 3)), twist[None], angles, np.zeros_like(angles))
     proj = model.identification_projector(st)
+    assert proj is not None  # constrained
     return bool(np.abs(proj[0, :3, :3]).max() < 0.5)
 
 

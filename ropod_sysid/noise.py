@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -60,6 +61,9 @@ from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.quantisation import encoder_variance, sawtooth_share, tone_share, window_motion
 from ropod_sysid.regressor import DEFAULT_SPAN_S, RowGrid
+
+if TYPE_CHECKING:
+    from ropod_sysid.solve import Solution
 
 __all__ = ["MotionRows", "SensorNoise", "encoder_variance", "fit_error_gram", "planned_rows",
            "predicted_fit_std", "recipe_error_gram", "row_kernel", "row_variances",
@@ -265,7 +269,7 @@ def rotation_weight(b: np.ndarray) -> float:
 
 
 def predicted_solution(a: np.ndarray, truth: np.ndarray, names: list[str] | None = None
-                       ) -> object:
+                       ) -> Solution:
     """The fit's solution (:func:`ropod_sysid.solve.solve`) of noise-free rows ``a`` (M, D, p)
     whose b_ID is A m for the values ``truth`` (p,): its rank, the columns it keeps and the
     combinations it names (``names``, default p0, p1, …)."""
@@ -281,7 +285,7 @@ def base_columns(a: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """The columns of rows ``a`` (M, D, p) a fit keeps (:func:`ropod_sysid.solve.solve`): all
     of them, or on a rank-deficient problem the base of each identifiable combination."""
     sol = predicted_solution(a, truth)
-    return np.flatnonzero(np.isfinite(sol.std_white))  # type: ignore[attr-defined]
+    return np.flatnonzero(np.isfinite(sol.std_white))
 
 
 def predicted_fit_std(a: np.ndarray, variances: np.ndarray, truth: np.ndarray,
@@ -648,6 +652,7 @@ def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
         x = np.moveaxis(w, 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
         gram += np.swapaxes(x, 1, 2) @ x
         if var is not None:
+            assert truth is not None  # var is None without truth
             var[k:k + chunk] = (np.einsum("nsdp,p->nsd", w, truth) ** 2).sum(axis=1)
     return gram, var
 

@@ -346,10 +346,10 @@ def load_platform(path: str | Path) -> Platform:
         data = safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        line = f" line {mark.line + 1}" if mark is not None else ""
+        at = f" line {mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None)
         why = f" ({' '.join(str(problem).split())})" if problem else ""
-        raise InputError(f"{path}:{line} is not valid YAML{why}; fix the syntax") from None
+        raise InputError(f"{path}:{at} is not valid YAML{why}; fix the syntax") from None
     return platform_from_dict(data, str(path))
 
 

@@ -49,7 +49,7 @@ def _merge_neighbours(group: np.ndarray, ext: dict[str, tuple[np.ndarray, ...]],
         return group, ext
     keep = np.ones(group.size, bool)
     keep[same + 1] = False
-    out = {}
+    out: dict[str, tuple[np.ndarray, ...]] = {}
     for side, (i, x, y) in ext.items():
         a, b = y[same], y[same + 1]
         with np.errstate(invalid="ignore"):

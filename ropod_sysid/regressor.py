@@ -633,7 +633,8 @@ def block_triangles(a: np.ndarray, b: np.ndarray, label: str = "", first_row: in
         parts = []
         if full:
             leaves = np.linalg.qr(rows[:full].reshape(-1, leaf, w), mode="r")
-            parts.append(leaves.reshape(-1, w))
+            # numpy's stubs: a QRResult for every mode, but mode="r" returns R alone
+            parts.append(leaves.reshape(-1, w))  # type: ignore[attr-defined]
         if rows.shape[0] > full:
             parts.append(rows[full:])
         r[d] = qr_triangle(np.vstack(parts))

@@ -26,7 +26,7 @@ from ropod_sysid.control import ModelControl, ModelLaw, desired_motion, generali
 from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.model import PlatformModel, State
-from ropod_sysid.params import DynamicParameters, friction_of
+from ropod_sysid.params import DynamicParameters, Friction, friction_of
 from ropod_sysid.platform import Platform
 from ropod_sysid.progress import Progress
 
@@ -343,6 +343,7 @@ def simulate(platform: Platform, params: DynamicParameters,
                     # PI on the rate (the integral), or PD on the angle (its error given)
                     held = np.where(np.isnan(angle_err), integ + err * dt, angle_err)
                     tau_raw = kp * err + ki * held
+                    assert limit is not None  # set with kp
                     tau = np.clip(tau_raw, -limit, limit)
                     saturated = tau != tau_raw
                     integ = np.where(saturated, integ, integ + err * dt)  # anti-windup
@@ -361,7 +362,8 @@ def simulate(platform: Platform, params: DynamicParameters,
                 if step == steps:
                     break
                 # RK4 with τ held over the step
-                q, qd, angles = rk4_step(lambda *y, f=f_b: deriv(*y, f), (q, qd, angles), dt,
+                # mypy: an argument after a *tuple of unknown length is one too many
+                q, qd, angles = rk4_step(lambda *y, f=f_b: deriv(*y, f), (q, qd, angles), dt,  # type: ignore[call-arg]
                                          (tau, tau, tau, tau), k1)
                 bar.update(1)
 
@@ -384,7 +386,7 @@ def simulate(platform: Platform, params: DynamicParameters,
     return results
 
 
-def derivatives(model: PlatformModel, params: DynamicParameters, friction: str,
+def derivatives(model: PlatformModel, params: DynamicParameters, friction: Friction,
                 q: np.ndarray, qd: np.ndarray, angles: np.ndarray, tau: np.ndarray,
                 f_b: np.ndarray | None = None, st: State | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

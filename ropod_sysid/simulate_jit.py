@@ -569,7 +569,8 @@ def base_parameters(model: PlatformModel, params: Mapping[str, float],
 def integrate(groups: tuple[np.ndarray, ...], bp: np.ndarray, ctrl: np.ndarray,
               gains: np.ndarray, stride: int, steps: int, last: np.ndarray, sp_all: np.ndarray,
               plan_all: np.ndarray, f_all: np.ndarray | None, angles0: np.ndarray, n_act: int,
-              records: tuple[np.ndarray, ...], bar: Any) -> None:
+              records: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                             np.ndarray, np.ndarray, np.ndarray], bar: Any) -> None:
     """Every run from rest at the unit angles ``angles0`` (R, J) through step ``last[r]``, in
     chunks of :data:`CHUNK` steps (the progress bar moves between them); writes ``records``
     (q, q̇, q̈, angles, τ, F_b, energy, the sums of τ near each record; (n_rec, R, …) each)."""
@@ -606,7 +607,8 @@ def first_compile(cons: tuple[np.ndarray, ...] | None = None) -> Iterator[None]:
         return
     name = "simulate_jit.lock" if plain else "simulate_jit.constrained.lock"
     try:
-        lock = open(Path(run._cache.cache_path) / name, "a")  # noqa: SIM115
+        # numba's private cache: not in its stubs
+        lock = open(Path(run._cache.cache_path) / name, "a")  # type: ignore[attr-defined]  # noqa: SIM115
     except (AttributeError, OSError):  # numba's cache internals differ, or a read-only cache
         yield
         return
@@ -622,11 +624,12 @@ def _refresh_caches() -> None:
         digest = hashlib.sha256()
         for module in KERNELS:
             digest.update(Path(inspect.getfile(module)).read_bytes())
-        stamp = Path(run._cache.cache_path) / "simulate_jit.kernels.sha256"
+        # numba's private cache: not in its stubs
+        stamp = Path(run._cache.cache_path) / "simulate_jit.kernels.sha256"  # type: ignore[attr-defined]
         if stamp.exists() and stamp.read_text() == digest.hexdigest():
             return
         for value in list(globals().values()):
-            cache = getattr(value, "_cache", None)
+            cache: Any = getattr(value, "_cache", None)
             if getattr(value, "py_func", None) is not None and hasattr(cache, "flush"):
                 cache.flush()
         stamp.write_text(digest.hexdigest())

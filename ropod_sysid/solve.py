@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import cast
 
 import numpy as np
 import scipy.linalg
@@ -253,7 +254,7 @@ class Triangles:
 
 def combined_rms(systems: Sequence[Triangles], m: np.ndarray) -> dict[str, float]:
     """RMS over all stacked samples (translation, rotation), unweighted."""
-    ss = sum(s.residual_ss(m) for s in systems)
+    ss = cast(np.ndarray, sum(s.residual_ss(m) for s in systems))  # systems: never empty
     n = max(sum(s.equations for s in systems), 1)
     rot = max(sum(s.equations * s.per_row[2] for s in systems), 1)
     return {"translation": float(np.sqrt((ss[0] + ss[1]) / (2 * n))),
@@ -600,4 +601,5 @@ def gram_triangle(gram: np.ndarray) -> np.ndarray:
     """An upper triangle R with RᵀR = ``gram`` (p+1, p+1), from its eigen-decomposition so that
     a semi-definite Gram matrix (a rank-deficient problem) keeps its null space."""
     lam, vec = np.linalg.eigh(0.5 * (gram + gram.T))
-    return np.linalg.qr(np.sqrt(np.maximum(lam, 0.0))[:, None] * vec.T, mode="r")
+    # numpy's stubs type qr as returning a QRResult for every mode; mode="r" returns R alone
+    return np.linalg.qr(np.sqrt(np.maximum(lam, 0.0))[:, None] * vec.T, mode="r")  # type: ignore[return-value]

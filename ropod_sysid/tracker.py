@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, TypeGuard
 
 import numpy as np
 
@@ -33,11 +34,14 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.io.log import Log
 from ropod_sysid.odometry import OdometryState, odometry_from
 
+if TYPE_CHECKING:
+    from ropod_sysid.model import PlatformModel
+
 WINDOW_S = 10.0  # the residual's LOESS window [s]: the tracker corrects drift slower than this
 MIN_FRAMES = 2  # tracker frames a log needs to correct anything
 
 
-def is_sparse(pose: np.ndarray | None) -> bool:
+def is_sparse(pose: np.ndarray | None) -> TypeGuard[np.ndarray]:
     """Whether a log's pose has rows without a tracker frame (NaN)."""
     return pose is not None and bool(np.isnan(pose[:, 0]).any())
 
@@ -77,7 +81,7 @@ def _frames(log: Log) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(have), log.pose[have]
 
 
-def fused_pose(log: Log, model: object, window: float = WINDOW_S) -> np.ndarray:
+def fused_pose(log: Log, model: PlatformModel, window: float = WINDOW_S) -> np.ndarray:
     """The pose (N, 3) of a log with a slow tracker: wheel odometry plus the smoothed tracker
     correction (see the module docstring); ``model`` is the platform's
     :class:`~ropod_sysid.model.PlatformModel`."""
@@ -87,7 +91,7 @@ def fused_pose(log: Log, model: object, window: float = WINDOW_S) -> np.ndarray:
     return q_o + corr.at(log.t)
 
 
-def with_fused_pose(log: Log, model: object, window: float = WINDOW_S) -> Log:
+def with_fused_pose(log: Log, model: PlatformModel, window: float = WINDOW_S) -> Log:
     """The log with its sparse tracker pose replaced by :func:`fused_pose` (else itself)."""
     if not is_sparse(log.pose):
         return log
@@ -97,7 +101,7 @@ def with_fused_pose(log: Log, model: object, window: float = WINDOW_S) -> Log:
 class _Odometry:
     """Raw wheel odometry continued from chunk to chunk."""
 
-    def __init__(self, model: object) -> None:
+    def __init__(self, model: PlatformModel) -> None:
         self.model = model
         self.state: OdometryState | None = None
         self.last: np.ndarray | None = None  # the previous chunk's last angles
@@ -115,7 +119,7 @@ class _Odometry:
 
 
 def fused_chunks(first: Log, rest: Iterator[Log], again: Callable[[], Iterator[Log]],
-                 model: object, window: float = WINDOW_S) -> Iterator[Log]:
+                 model: PlatformModel, window: float = WINDOW_S) -> Iterator[Log]:
     """The chunks ``first`` + ``rest`` of a log with a slow tracker, each with the fused pose;
     ``again`` reads the log's chunks anew for the first pass (the odometry at the frames)."""
     odo = _Odometry(model)
@@ -138,7 +142,7 @@ def _chain(first: Log, rest: Iterator[Log]) -> Iterator[Log]:
 
 
 def dense_or_fused(chunks: Iterator[Log], again: Callable[[], Iterator[Log]],
-                   model: Callable[[], object], window: float = WINDOW_S) -> Iterator[Log]:
+                   model: Callable[[], PlatformModel], window: float = WINDOW_S) -> Iterator[Log]:
     """A log's chunks as they are, or — when the first one has rows without a tracker frame —
     with the fused pose (:func:`fused_chunks`); ``model`` builds the platform model."""
     first = next(chunks, None)

@@ -185,7 +185,8 @@ def free_run(model: PlatformModel, params: DynamicParameters, t: np.ndarray,
                              np.zeros((1, 1, 0)), np.zeros((1, 1, 3)), False, x,
                              np.zeros((1, n_act)), *rec, given)
         return rec[0][:, 0], rec[1][:, 0], rec[3][:, 0]
-    y = (q0[None].astype(float), qd0[None].astype(float), angles0[None].astype(float))
+    y: tuple[np.ndarray, ...] = (q0[None].astype(float), qd0[None].astype(float),
+                                 angles0[None].astype(float))
     out = [y]
 
     def rates(q: np.ndarray, qd: np.ndarray, ang: np.ndarray, torque: np.ndarray

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import compress
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -67,7 +67,7 @@ class FixedLayout:
     """Where the numbers of every message shaped like ``template`` are."""
 
     size: int
-    order: str                                  # "<" or ">"
+    order: Literal["<", ">"]                    # little- or big-endian
     structure_at: np.ndarray                    # offsets of the non-number bytes
     structure: np.ndarray                       # their values in the template
     fields: dict[str, tuple[np.ndarray, str]]   # name → (offsets of any shape, numpy type)

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import csv
 import gzip
+import io
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 import pyarrow as pa
@@ -444,7 +444,7 @@ def _fast_chunks(path: Path, where: str, n_cols: int, col_idx: list[int], block_
                 buf[:held] = buf[cut:end]
 
 
-def _read_into(f: BinaryIO, buf: bytearray, start: int) -> int:
+def _read_into(f: io.BufferedIOBase, buf: bytearray, start: int) -> int:
     """Bytes read from ``f`` into ``buf`` from ``start`` on, until it is full or the file ends
     (a gzip stream returns less than asked)."""
     got = start

@@ -69,7 +69,8 @@ class Rows:
             parts = [p if p.objects is not None else Rows(p.payloads, [_parse(x) for x in
                                                                        p.payloads])
                      for p in parts]
-        objects = None if parts[0].objects is None else [o for p in parts for o in p.objects]
+        # (every part has objects or none has: made so above)
+        objects = None if parts[0].objects is None else [o for p in parts for o in p.objects]  # type: ignore[union-attr]
         fast = None if parts[0].fast is None else np.concatenate([p.fast for p in parts])
         return Rows([b for p in parts for b in p.payloads], objects, fast,
                     {k: np.concatenate([p.columns[k] for p in parts]) for k in parts[0].columns})
@@ -143,6 +144,7 @@ class BatchDecoder:
                 self.template = msg
                 self.layout = self._layout_of(payloads[0], msg)
         n = len(payloads)
+        columns: dict[str, np.ndarray]
         if self.layout is None:
             fast, columns = np.zeros(n, dtype=bool), {}
         else:
@@ -200,8 +202,10 @@ def contract_log(rows: Rows, decoder: BatchDecoder, platform: Platform, where: s
             objects = [_parse(p) for p in rows.payloads]
         fields = platform.layout.fields
         if arrays is None:
+            assert objects is not None  # parsed above when arrays is None
             arrays = _json_columns(objects, fields, has_pose)
         if arrays is None:
+            assert objects is not None
             arrays = _json_loop(objects, fields, has_pose, where, offset)
     else:
         arrays = _ros2_columns(rows, decoder, platform, where)

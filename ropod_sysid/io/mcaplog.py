@@ -21,7 +21,7 @@ import struct
 import sys
 import warnings
 import zlib
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from itertools import compress
 from pathlib import Path
@@ -167,7 +167,8 @@ class MessageRun:
         return list(compress(self.data, [c == channel_id for c in self.channels]))
 
 
-def _records(path: str | Path, scan: McapScan, light: bool = False) -> Iterator[Any]:
+def _records(path: str | Path, scan: McapScan, light: bool = False
+             ) -> Generator[Any, None, None]:
     """The records of an MCAP file in file order (chunks broken up), up to the first damage,
     which is noted in ``scan`` (with :attr:`McapScan.complete` and the size) as
     :func:`scan_mcap` describes. ``light``: a chunk of only messages comes as one

@@ -150,8 +150,8 @@ def _write_contract_json(log: Log, f: IO[bytes], topic: str, log_times: list[int
     dumps = json.JSONEncoder(separators=(",", ":"), allow_nan=True).encode
     for k, tk in enumerate(t):
         units: dict[str, dict[str, float]] = {u: {} for u in layout.units}
-        for (u, f), v in zip(fields, rows[k], strict=True):
-            units[u][f] = v
+        for (u, name), v in zip(fields, rows[k], strict=True):
+            units[u][name] = v
         msg: dict[str, Any] = {"t": tk, "units": units}
         if pose is not None:
             msg["pose"] = dict(zip(POSE_FIELDS, pose[k], strict=True))

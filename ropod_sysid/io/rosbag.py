@@ -56,6 +56,7 @@ def ros1_to_cdr(msgtype: str, msgdef: str, where: str) -> Callable[[bytes], byte
 
 def _sections(msgtype: str, msgdef: str) -> list[tuple[str, str]]:
     """The (type, definition) sections of a ROS 1 / ros2msg concatenated definition."""
+    lines: list[str]
     out, name, lines = [], _full(msgtype), []
     for line in msgdef.splitlines():
         if line.startswith("=" * 10):
@@ -102,6 +103,7 @@ def iter_bag_log(path: str | Path, platform: Platform, chunk: int = 50_000,
         conn = by_id[stream.channel.id]
         convert = None
         if _is_ros1(reader):
+            assert stream.schema is not None  # every channel has one (above)
             convert = ros1_to_cdr(conn.msgtype, stream.schema.data.decode(), where)
         pieces = layout_pieces(stream, platform, where, chunk)
         tb = TimeBase(where, pieces.locate, gaps)

@@ -54,7 +54,7 @@ import json
 import math
 import re
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -551,6 +551,7 @@ def _write_mcap(f: dict[str, np.ndarray], recv: np.ndarray, out: Any, encoding: 
     n_frames, n = f["sensor_ts"].shape
     lists = {name: f[name].tolist() for name in SW_FIELDS}
     recv_l = recv.tolist()
+    payload: Callable[[dict[str, Any]], bytes]
     if encoding == "json":
         writer = new_writer(out)
         schema_id = writer.register_schema(SW_JSON_SCHEMA, "jsonschema",

@@ -346,6 +346,7 @@ def rows_to_frames(rows: Rows, decoder: BatchDecoder, platform: Platform, where:
                 np.zeros(len(rows), dtype=bool), notes)
     decoded = rows.objects if decoder.encoding == "json" else \
         [decoder.decode(p) for p in rows.payloads]
+    assert decoded is not None  # the JSON decoder of smart-wheel data parses every message
     fr = frames_from_messages(decoded, platform, where, decoder.encoding, offset)
     return fr.sensor_ts, fr.values, fr.malformed, fr.notes
 

@@ -116,7 +116,8 @@ class TimeBase:
         first = self.n - (0 if self.t_last is None else 1)   # sample index of ext[0]
         steps = np.diff(ext)
         med = self.median or 0.0
-        gap = np.flatnonzero((steps > GAP_STEPS * med) & (steps > GAP_FLOOR_S)) if med else []
+        gap: np.ndarray | list[int] = (
+            np.flatnonzero((steps > GAP_STEPS * med) & (steps > GAP_FLOOR_S)) if med else [])
         if len(gap):
             if not self.allow:
                 k = int(gap[0])

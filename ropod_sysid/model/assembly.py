@@ -26,8 +26,9 @@ projection, never a division by zero. Without constraints P = I and D = 3 for th
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -209,7 +210,9 @@ class PlatformModel:
         self.alpha = platform.friction_tanh_gain
         self.n_units = platform.n_units
         self.layout = platform.layout
-        self.groups: list[tuple[Group, object]] = [
+        # per group its units: a UnitType instance, whose optional members (own coordinates,
+        # constraints, controller plans) are probed with hasattr
+        self.groups: list[tuple[Group, Any]] = [
             (g, g.type.from_specs(g.specs, self.alpha)) for g in platform.groups]
         self._columns: dict[str, list[tuple[np.ndarray | slice, np.ndarray | slice]]] = {}
         # the units' own coordinates: per group its rows among the D, and their angle channels
@@ -414,7 +417,7 @@ class PlatformModel:
         return gather(parts, self.layout.n_angles, 1)[0]
 
     # ------------------------------------------------------------ dynamics
-    def friction(self, st: State, params: object, friction: Friction = "per-wheel"
+    def friction(self, st: State, params: Mapping[str, float], friction: Friction = "per-wheel"
                  ) -> tuple[np.ndarray, np.ndarray | None]:
         """Friction torques τ_f (N, A) added to the actuator torques and the generalized
         friction force f_f (N, D) of the unactuated joints and the base (or None)."""
@@ -432,7 +435,7 @@ class PlatformModel:
             f_f = f if f_f is None else f_f + f
         return gather(parts, self.layout.n_currents, 1), f_f
 
-    def direct_eom(self, st: State, params: object,
+    def direct_eom(self, st: State, params: Mapping[str, float],
                    friction: Friction = "per-wheel") -> DirectEOM:
         """M_dir, B_Fb, B_τ, b_dir and the friction terms (eqs. 32, 64, 65)."""
         n, d = st.q.shape[0], self.n_dof
@@ -446,7 +449,7 @@ class PlatformModel:
         return DirectEOM(m_dir, placed(base.b_fb(st.q[:, 2]), np.arange(3), d), st.b_tau, b_dir,
                          tau_f, f_f)
 
-    def forward_dynamics(self, st: State, params: object, tau: np.ndarray,
+    def forward_dynamics(self, st: State, params: Mapping[str, float], tau: np.ndarray,
                          f_b: np.ndarray | None = None,
                          friction: Friction = "per-wheel",
                          stabilize: float = 0.0) -> np.ndarray:
@@ -478,7 +481,7 @@ class PlatformModel:
         rate = st.angle_rate
         return rate[:, self.coordinate_channels]
 
-    def inverse_dynamics(self, st: State, params: object, qdd: np.ndarray,
+    def inverse_dynamics(self, st: State, params: Mapping[str, float], qdd: np.ndarray,
                          f_b: np.ndarray | None = None,
                          friction: Friction = "per-wheel",
                          torque_max: np.ndarray | None = None) -> np.ndarray:
@@ -504,7 +507,7 @@ class PlatformModel:
             b_tau = np.einsum("nij,nja->nia", proj, b_tau)
         return weighted_right_inverse(b_tau, need, torque_max) - eom.tau_f
 
-    def disturbance(self, st: State, params: object, qdd: np.ndarray, tau: np.ndarray,
+    def disturbance(self, st: State, params: Mapping[str, float], qdd: np.ndarray, tau: np.ndarray,
                     friction: Friction = "per-wheel") -> np.ndarray:
         """F_b = B_Fb⁻¹ (M_dir q̈ − B_τ (τ + τ_f) − f_f − b_dir) (eq. 40); (N, 3)."""
         eom = self.direct_eom(st, params, friction)
@@ -516,7 +519,7 @@ class PlatformModel:
         # B_Fb is a rotation about z (det = 1, eq. 3): its inverse is its transpose
         return np.einsum("ndc,nd->nc", eom.b_fb[:, :3], resid[:, :3])
 
-    def kinetic_energy(self, st: State, params: object) -> np.ndarray:
+    def kinetic_energy(self, st: State, params: Mapping[str, float]) -> np.ndarray:
         """Total kinetic energy of base and units [J]; equals ½ q̇ᵀ M_dir q̇ (App. C)."""
         t = base.kinetic_energy_base(params["m_b"], params["Jzz_b"], st.qd)
         for (_, unit), data in zip(self.groups, st.units, strict=True):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import matplotlib
 import numpy as np
@@ -118,7 +118,7 @@ def _png(fig: Figure) -> bytes:
     """
     fig.patch.set_facecolor("white")
     fig.canvas.draw()
-    return _encode(fig.canvas)
+    return _encode(cast(FigureCanvasAgg, fig.canvas))  # every figure's (:func:`_figure`)
 
 
 def _encode(canvas: FigureCanvasAgg) -> bytes:
@@ -398,7 +398,7 @@ def _render_shared(figure: FitFigure | InputsFigure, args: list[tuple[Any, ...]]
             ax.dataLim.set(Bbox.union([box[k] for box in limits]))
             ax.autoscale_view()
         fig.patch.set_facecolor("white")
-        canvas = fig.canvas
+        canvas = cast(FigureCanvasAgg, fig.canvas)  # every figure's (:func:`_figure`)
         for artist in changing:
             artist.set_animated(True)
         try:

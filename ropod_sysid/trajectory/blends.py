@@ -138,7 +138,7 @@ class _Plan:
                                            steering=self.steering)
         return self._cache[key]
 
-    def to(self, b: Sequence[float], t: float | None = None) -> float:
+    def to(self, b: Sequence[float] | np.ndarray, t: float | None = None) -> float:
         b = np.asarray(b, float)
         t = self.blend_time(self.level, b) if t is None else t
         self.segs.append([self.level, b, t])

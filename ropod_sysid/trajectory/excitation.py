@@ -500,7 +500,8 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
                      f"({why_first}); took the next")
     chosen = good[0]
     if sigma is not None and len(good) > 1:
-        best = int(np.argmin([_total_error(g[4], sigma) for g in good]))
+        # (with sigma every candidate within the limits has its check report)
+        best = int(np.argmin([_total_error(g[4], sigma) for g in good]))  # type: ignore[arg-type]
         if best:
             notes.append(f"of the {len(good)} best candidates within the limits, number "
                          f"{best + 1} has the least predicted error once the encoders' bias "

@@ -44,7 +44,7 @@ def with_own_coordinates(model: object, t: np.ndarray, qd: np.ndarray, qdd: np.n
     predicted angle rates (…, N, J), β̈ by differences over t); unchanged without any."""
     if model.n_dof == 3:  # type: ignore[attr-defined]
         return qd, qdd
-    own = rates[..., model.coordinate_channels]  # type: ignore[attr-defined]
+    own = rates[..., model.coordinate_channels]  # type: ignore[attr-defined, index]
     acc = np.gradient(own, t, axis=-2) if own.shape[-2] > 1 else np.zeros_like(own)
     return np.concatenate([qd, own], axis=-1), np.concatenate([qdd, acc], axis=-1)
 
@@ -54,7 +54,7 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
                     noise: tuple[object, object] | None = None,
                     angle_rates: np.ndarray | None = None,
                     motion: tuple[np.ndarray, np.ndarray] | None = None,
-                    ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray | float]:
     """A_ID,ext (M, D, p) at M samples with unit angles (M, J) (chunked to bound the memory);
     the angle rates follow from the base motion (for the swivel: δ̇ of eq. 8a) unless
     ``angle_rates`` (M, J) gives them (as a log's encoders would); a unit's own joint is
@@ -71,7 +71,7 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
     from ropod_sysid.noise import kind_grams, planned_rows, recipe_error_gram, row_variances
 
     out, var = [], []
-    gram = 0.0
+    gram: np.ndarray | float = 0.0  # 0.0 without rows
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
         rates = None if angle_rates is None else angle_rates[sl]

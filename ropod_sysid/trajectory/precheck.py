@@ -67,7 +67,7 @@ def _runs(mask: np.ndarray, t: np.ndarray, values: np.ndarray, what: str, limit:
           variant: str, below: bool = False) -> list[Finding]:
     """Contiguous runs of ``mask`` as findings (peak of ``values`` in each; its least value
     for a lower bound, ``below``)."""
-    out = []
+    out: list[Finding] = []
     if not np.any(mask):
         return out
     m = np.concatenate([[False], mask, [False]]).astype(np.int8)
@@ -340,7 +340,8 @@ class CheckReport:
         lim = self.limits
         out = [f"run: {self.duration:.2f} s, {self.samples} setpoints; platform {self.platform} "
                f"({len(self.units)} units); variants: {', '.join(VARIANTS)}"]
-        rows = [("speed |v|", "m/s", self.peaks["speed"], lim.v_max),
+        rows: list[tuple[str, str, float, float | None]] = [
+                ("speed |v|", "m/s", self.peaks["speed"], lim.v_max),
                 ("acceleration |a|", "m/s²", self.peaks["acceleration"], lim.a_max),
                 ("rotation rate |ω|", "rad/s", self.peaks["omega"], lim.w_max),
                 ("rot. acceleration |ω̇|", "rad/s²", self.peaks["alpha"], lim.alpha_max)]
@@ -370,13 +371,13 @@ class CheckReport:
         if self.curvature is not None and self.limits.curvature_radius_min is not None:
             out += self.curvature.text()
             out.append("")
-        for units, peak, when, title in (
+        for units, unit_peak, when, title in (
                 (self.turning, self.pivot_peak, self.pivot_peak_time,
                  "max predicted pivot rate per unit [rad/s] (trailing start, eq. 8a):"),
                 (self.steered, self.steer_peak, self.steer_peak_time,
                  "max predicted steering rate per unit [rad/s] (planned steering):")):
             if units:
-                out += self._peak_table(title, units, peak, when)
+                out += self._peak_table(title, units, unit_peak, when)
         if self.singular is not None:
             out += self.singular.text()
             out.append("")

@@ -132,10 +132,10 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
             mine = None
         extra = {} if not n_planned else {"legs": None if mine is None else mine[..., 0]}
         if twist_rates is not None:
-            p = unit.quasi_steady_angles(t, tw, twist_rates, **extra)  # type: ignore[attr-defined]
+            p = unit.quasi_steady_angles(t, tw, twist_rates, **extra)
         else:
             start = None if initial is None else np.asarray(initial, float)[..., g.angles]
-            p = unit.predict_angles(t, tw, start, **extra)  # type: ignore[attr-defined]
+            p = unit.predict_angles(t, tw, start, **extra)
         angles[..., g.angles] = p.angles
         rates[..., g.angles] = p.rates
         act[..., g.currents] = p.actuator

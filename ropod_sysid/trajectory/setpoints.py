@@ -191,9 +191,10 @@ def read_trajectory_csv(path: str | Path, planned: Sequence[str] = ()) -> Trajec
     if planned:
         got = read_numeric_table(path, ["t"], optional=tuple(planned))
         extra = {c: got[c] for c in planned if c in got}
+    # mypy spreads a *generator over every positional parameter, planned's too
     if "x" in cols:
-        return Trajectory(*(cols[c] for c in COLUMNS), extra)
-    return Trajectory.from_twist(*(cols[c] for c in TWIST_COLUMNS), extra)
+        return Trajectory(*(cols[c] for c in COLUMNS), extra)  # type: ignore[call-arg, arg-type]
+    return Trajectory.from_twist(*(cols[c] for c in TWIST_COLUMNS), extra)  # type: ignore[call-arg, arg-type]
 
 
 def _fine(traj: Trajectory, dt: float = 0.005) -> Trajectory:

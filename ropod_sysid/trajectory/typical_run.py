@@ -244,6 +244,7 @@ def _typical_program(duration: float, caps: Limits, floor: Floor, pivots: np.nda
         kind, mirror = order[lobe % len(order)]
         first = len(plan.segs)
         size = sizes[kind]
+        assert size is not None  # (none is: checked above)
         if lobe == 0:  # the start moved the base along +x already: shorten the first straight
             if spin_start:
                 p0 = _path(plan.segs, 0.0, np.zeros(2), 0.005)[1][-1]
@@ -457,7 +458,8 @@ def typical(duration: float = 60.0, v_max: float = 1.0, a_max: float = 1.0,
                                   platform, planned=np.stack([vt.planned_series(columns)
                                                               for vt in var.values()]))
             peak = pred.turning_peak
-            if pivots is not None and (peak > pivot_rate_max * 0.95 or pred.flagged):
+            # (pivots only with a pivot-rate limit, as steering only with a steering-rate one)
+            if pivots is not None and (peak > pivot_rate_max * 0.95 or pred.flagged):  # type: ignore[operator]
                 pivot_margin *= 0.8
                 last_error = f"predicted pivot rate {peak:.2f} rad/s exceeds the limit"
                 continue

@@ -45,7 +45,7 @@ from typing import Any, ClassVar, Literal, Protocol
 import numpy as np
 
 FrictionVariant = Literal["per-wheel", "shared", "body"]
-FRICTION_VARIANTS: tuple[str, ...] = ("per-wheel", "shared", "body")
+FRICTION_VARIANTS: tuple[FrictionVariant, ...] = ("per-wheel", "shared", "body")
 
 
 @dataclass(frozen=True)
@@ -260,7 +260,7 @@ class UnitType(Protocol):
         ...
 
 
-def check_variant(variant: str) -> str:
+def check_variant(variant: str) -> FrictionVariant:
     """A friction variant name, else a one-line error."""
     from ropod_sysid.errors import InputError
 

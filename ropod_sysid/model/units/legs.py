@@ -59,7 +59,7 @@ from __future__ import annotations
 import zlib
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, overload
 
 import numpy as np
 
@@ -243,6 +243,13 @@ class LeggedUnits:
                                           self.alpha)
 
     # ------------------------------------------------------------ kinematics
+    @overload
+    def _split(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+    @overload
+    def _split(self, values: None) -> tuple[None, None]: ...
+    @overload
+    def _split(self, values: np.ndarray | None
+               ) -> tuple[np.ndarray | None, np.ndarray | None]: ...
     def _split(self, values: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
         if values is None:
             return None, None

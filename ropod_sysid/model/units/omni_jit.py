@@ -25,10 +25,11 @@ import numpy as np
 from numba import njit
 
 if TYPE_CHECKING:
+    from ropod_sysid.model.units import FrictionVariant
     from ropod_sysid.model.units.omni import OmniUnits
 
 
-def arrays(units: OmniUnits, params: Mapping[str, float], variant: str
+def arrays(units: OmniUnits, params: Mapping[str, float], variant: FrictionVariant
            ) -> tuple[np.ndarray, np.ndarray]:
     """(``geo``, ``par``) of the group for the parameters and the friction variant."""
     geo = np.concatenate([[units.alpha], np.column_stack(

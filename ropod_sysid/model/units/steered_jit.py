@@ -36,13 +36,14 @@ import numpy as np
 from numba import njit
 
 if TYPE_CHECKING:
+    from ropod_sysid.model.units import FrictionVariant
     from ropod_sysid.model.units.steered import SteeredUnits
 
 CONSTRAINTS = 1  # constraint rows per unit (S2), for the loop's row offsets
 PLANNED = 2  # planned entries per unit (β_d, β̇_d)
 
 
-def arrays(units: SteeredUnits, params: Mapping[str, float], variant: str
+def arrays(units: SteeredUnits, params: Mapping[str, float], variant: FrictionVariant
            ) -> tuple[np.ndarray, np.ndarray]:
     """(``geo``, ``par``) of the group for the parameters and the friction variant."""
     geo = np.concatenate([[units.alpha], np.column_stack(

@@ -27,12 +27,13 @@ import numpy as np
 from numba import njit
 
 if TYPE_CHECKING:
+    from ropod_sysid.model.units import FrictionVariant
     from ropod_sysid.model.units.swivel import SwivelUnits
 
 N_GEO = 5  # geometry entries before the pivots
 
 
-def arrays(units: SwivelUnits, params: Mapping[str, float], variant: str
+def arrays(units: SwivelUnits, params: Mapping[str, float], variant: FrictionVariant
            ) -> tuple[np.ndarray, np.ndarray]:
     """(``geo``, ``par``) of the group for the parameters and the friction variant."""
     geo = np.concatenate([[units.r_w, units.d_w, units.s_w, units.dx, units.alpha],
