@@ -10,6 +10,7 @@ import numpy as np
 from ropod_sysid.fit import FitResult
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
+from ropod_sysid.regressor import QUARTIC_MIN_SAMPLES
 from ropod_sysid.solve import Solution
 from ropod_sysid.validate import LogValidation
 
@@ -63,12 +64,9 @@ LOESS_CAVEAT_STD = 0.02
 
 def _loess_caveat(result: FitResult) -> str:
     """The caveat of a "well determined" (or rank-deficient) verdict whose σ has grown small
-    enough that the
-    LOESS's discretisation bias (:data:`LOESS_CAVEAT_STD`) may exceed it, where the quartic
-    smoother is an option (every log's span at least
+    enough that the LOESS's discretisation bias may exceed it (:data:`LOESS_CAVEAT_STD`),
+    where the quartic smoother is an option (every log's span at least
     :data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES` samples)."""
-    from ropod_sysid.regressor import QUARTIC_MIN_SAMPLES
-
     o = result.options
     if o.span.degree != 2 or not result.logs:
         return ""
