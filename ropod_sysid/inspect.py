@@ -10,6 +10,12 @@ leaves out the base rows near singular configurations and where the wheels slip:
 asks that it keeps them for at least half of the moving time, and it does not ask for sideways
 motion where sideways translation is itself a singular configuration (two steered wheels whose
 axles then lie on one line).
+
+It also says how to fit the log (:func:`fit_suggestion`): where the angles move by whole counts
+of an encoder, ``--encoder-counts`` with them, and where the default 0.1 s span holds the
+quartic smoother's 17 samples or more, ``--smoother quartic --input-delay auto`` besides (on
+ten minutes of 1 kHz logs the default LOESS's bias left 41–83 % of the values within 2σ, these
+options 90–100 %: docs/accuracy.md, "Long logs").
 """
 
 from __future__ import annotations
@@ -27,6 +33,8 @@ from ropod_sysid.io.timebase import GAP_RULE, check_times
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import base_twist, unwrap_angles
 from ropod_sysid.platform import Platform
+from ropod_sysid.quantisation import detect_encoder_counts
+from ropod_sysid.regressor import QUARTIC_MIN_SAMPLES, Span
 
 _DROPPED = re.compile(r"dropped (\d+) of \d+ smart-wheel frames")
 
@@ -88,6 +96,9 @@ class Inspection:
     sideways_singular: bool = False  # sideways translation is a singular configuration
     warnings: list[str] = field(default_factory=list)
     column_units: dict[str, str] = field(default_factory=dict)  # column → SI unit
+    encoder_counts: int | None = None  # counts per revolution the angles move by, if whole
+    fit_options: list[str] = field(default_factory=list)  # what to give fit (fit_suggestion)
+    fit_advice: str = ""  # why
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-ready data."""
@@ -169,6 +180,11 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
                        f"{dt_med:.3g} s")
     if dropped:
         notes_w.append(f"{dropped} corrupt frame{'s' if dropped > 1 else ''} dropped on reading")
+    enc = lay.encoders
+    counts = (detect_encoder_counts(log.angles[:, enc], np.asarray(lay.wrapped)[enc])
+              if n else None)
+    span = Span.parse(None).samples(dt_med, n) if dt_med > 0 else 0
+    options, advice = fit_suggestion(counts, span, model.constrained)
     return Inspection(
         source=log.source, units=list(log.units), samples=n, duration=duration, rate=rate,
         dt_median=dt_med, jitter=jitter, gap_count=int(gap_idx.size), gaps=gaps,
@@ -176,7 +192,31 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
         velocity_ranges=vel_ranges, moving_time=moving_time, pivot_coverage=coverage,
         enough_to_fit=not reasons, reasons=reasons, warnings=notes_w,
         column_units=_column_units(log), base_rows_used=base_used, sideways_singular=sideways,
+        encoder_counts=counts, fit_options=options, fit_advice=advice,
     )
+
+
+def fit_suggestion(counts: int | None, span_samples: int, constrained: bool = False
+                   ) -> tuple[list[str], str]:
+    """The fit options a log calls for, and why: ``--encoder-counts`` for angles that move by
+    whole ``counts`` per revolution (its quantisation shrinks a plain fit's values), and with
+    them, where the default span holds ``span_samples`` ≥
+    :data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES`, the quartic smoother with the drives'
+    lag searched (the LOESS's discretisation bias, which σ does not include, outgrows a long
+    log's σ). Nothing for angles not on a count grid: the quartic passes more of an unknown
+    noise. ``constrained``: steered wheels or legs, where the correction can over-correct."""
+    if counts is None:
+        return [], ""
+    options = [f"--encoder-counts {counts}"]
+    why = "to correct for the encoders' quantisation, which shrinks a plain fit's values"
+    if span_samples >= QUARTIC_MIN_SAMPLES:
+        options += ["--smoother quartic", "--input-delay auto"]
+        why += (f"; the 0.1 s span holds {span_samples} samples, enough for the quartic "
+                "smoother's five-point differences, which keep the LOESS's bias out of a long "
+                "log's values (with the drives' lag searched)")
+    if constrained:
+        why += "; with steered wheels or legs the correction can over-correct: compare a plain fit"
+    return options, why
 
 
 def _column_units(log: Log) -> dict[str, str]:
@@ -283,6 +323,10 @@ def format_inspection(ins: Inspection) -> str:
         lines.append(f"note       {note}")
     for w in ins.warnings:
         lines.append(f"warning    {w}")
+    if ins.encoder_counts is not None:
+        lines.append(f"encoders   the angles move by whole counts of 2π/{ins.encoder_counts}")
+    if ins.fit_options:
+        lines.append(f"fit with   {' '.join(ins.fit_options)} ({ins.fit_advice})")
     if ins.enough_to_fit:
         lines.append("verdict    enough to fit: long and varied enough")
     else:

@@ -111,6 +111,7 @@ def test_inspect_fields(files, runs_off_square):
     lo, hi = info["velocity_ranges"]["vx"]
     assert 0.8 < hi < 1.05 and lo > -0.05     # 0.6 + 0.4 sin, from rest
     assert set(info["pivot_coverage"]) == {"1", "2", "3", "4"}
+    assert info["encoder_counts"] is None and info["fit_options"] == []  # exact angles
     # 8 s from rest to rest: not enough motion, and it says so
     assert info["enough_to_fit"] is False
     assert any("of motion; record at least 10 s" in r for r in info["reasons"])
@@ -119,6 +120,33 @@ def test_inspect_fields(files, runs_off_square):
     for field in ("units", "samples", "rate", "jitter", "gaps", "dropped", "ranges", "cur_4L",
                   "verdict"):
         assert field in text.output
+
+
+def test_inspect_says_how_to_fit_quantised_angles(off_square, runs_off_square):
+    """Angles on a 2¹⁴-count grid: --encoder-counts, and at 200 Hz (21 samples in the 0.1 s
+    span) the quartic smoother with the lag searched; at 100 Hz (11 samples) the correction
+    alone; on a constrained platform the over-correction caveat."""
+    from ropod_sysid.inspect import fit_suggestion
+    from ropod_sysid.simulate import Sensors, sensed
+
+    log = sensed(runs_off_square[0].log, off_square, Sensors(encoder_counts=2**14),
+                 np.random.default_rng(1))
+    ins = inspect_log(log, off_square)
+    assert ins.encoder_counts == 2**14
+    assert ins.fit_options == ["--encoder-counts 16384", "--smoother quartic",
+                               "--input-delay auto"]
+    text = format_inspection(ins)
+    assert "encoders   the angles move by whole counts of 2π/16384\n" in text
+    assert ("fit with   --encoder-counts 16384 --smoother quartic --input-delay auto (to correct "
+            "for the encoders' quantisation, which shrinks a plain fit's values; the 0.1 s span "
+            "holds 21 samples, enough for the quartic smoother's five-point differences, which "
+            "keep the LOESS's bias out of a long log's values (with the drives' lag searched))"
+            in text)
+    assert fit_suggestion(2**14, 11)[0] == ["--encoder-counts 16384"]
+    assert fit_suggestion(2**14, 17)[0][1:] == ["--smoother quartic", "--input-delay auto"]
+    assert fit_suggestion(2**14, 11, constrained=True)[1].endswith(
+        "; with steered wheels or legs the correction can over-correct: compare a plain fit")
+    assert fit_suggestion(None, 101) == ([], "")
 
 
 def test_inspect_finds_gaps_and_the_criteria_decide(off_square, runs_off_square):
