@@ -183,7 +183,7 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
               help="Counts per revolution of the wheel and pivot encoders: correct the fit "
                    "for their quantisation, whose errors in the accelerations sit in A_ID,ext "
                    "and shrink the values (corrected least squares; docs/method.md). Costs "
-                   "about 3× the fit's time.")
+                   "about 2× the fit's time (the shipped sample; 10- and 30-minute 1 kHz logs).")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,

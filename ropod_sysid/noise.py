@@ -344,6 +344,14 @@ def gram_stride(span_rows: int) -> int:
     return max(1, int(span_rows) // GRAM_ROWS_PER_SPAN)
 
 
+# fit --encoder-counts: the gram on every gram_stride-th row for a log's first this-many gram
+# rows (a minute at 100 Hz or at 1 kHz), then on every SEARCH_GRAM_LATER-th of those, each
+# weighted so (fit_error_gram's sparse_after). A long log's gram is a sum over many rows of a
+# function of the motion; its later rows sampled 4x sparser moved every value of a 10-minute
+# 1 kHz log's corrected fit (ten recordings of one 60 s run, benchmarks/longlog.py's) by at most
+# 0.11σ (median 0.04σ) and took the fit from 4.1 to 1.9 s; logs of up to 2,000 gram rows, the
+# shipped samples', are untouched
+FIT_GRAM_DENSE = 2000
 # the delay search's gram of counts detected in a log (not given): on every this-many-th of the
 # rows the fit's gram uses (search_gram_stride) ...
 SEARCH_GRAM_SPARSER = 4

@@ -648,21 +648,26 @@ def add_error_gram(block: Triangles, model: PlatformModel, pre: Preprocessed,
                    encoder_counts: int | None, search_counts: int | None) -> None:
     """Give a block's triangles (the rows at sample ``index`` of ``pre``, the first the log's
     row ``first_row``) the encoders' error gram: of ``encoder_counts`` (``--encoder-counts``)
-    on the fit's rows, else of ``search_counts`` (counts detected in the log, for the delay
-    search's criterion alone) on the search's sparser rows
+    on the fit's rows (past a log's first :data:`ropod_sysid.noise.FIT_GRAM_DENSE` gram rows
+    sparser), else of ``search_counts`` (counts detected in the log, for the delay search's
+    criterion alone) on the search's sparser rows
     (:func:`ropod_sysid.noise.search_gram_stride`); none without either."""
     counts = encoder_counts or search_counts
     if not counts:
         return
     from ropod_sysid.noise import (
+        FIT_GRAM_DENSE,
         SEARCH_GRAM_DENSE,
         SEARCH_TONE_NODES,
         fit_error_gram,
+        gram_stride,
         search_gram_stride,
     )
 
     if encoder_counts:
-        block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row)
+        stride = gram_stride(pre.grid.span)
+        block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row,
+                                          stride, None, FIT_GRAM_DENSE * stride)
     else:
         stride = search_gram_stride(pre.grid.span)
         block.error_gram = fit_error_gram(model, pre, index, counts, friction, first_row,
