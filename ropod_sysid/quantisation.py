@@ -279,20 +279,25 @@ def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None)
 
 
 def counts_note(source: str, detected: int | None, given: int | None,
-                constrained: bool = False) -> str | None:
+                constrained: bool = False, quartic: bool = False) -> str | None:
     """The note on a log whose angles move by whole counts of its encoders
     (:func:`detect_encoder_counts`) when the fit was not told them, or was told others.
     ``constrained``: a platform whose constraint forces the fit projects out (steered wheels,
     legs), where the correction was measured to over-correct on three of four simulated
-    platforms (docs/accuracy.md). (What ``--input-delay auto`` did with the counts is the
-    search's own note: :func:`ropod_sysid.delay.search_counts_note`.)"""
+    platforms (docs/accuracy.md). ``quartic``: a LOESS fit whose span holds the quartic
+    smoother's samples (:data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES`), which with the
+    correction keeps the LOESS's bias out of long logs (as ``inspect`` advises:
+    :func:`ropod_sysid.inspect.fit_suggestion`). (What ``--input-delay auto`` did with the
+    counts is the search's own note: :func:`ropod_sysid.delay.search_counts_note`.)"""
     if detected is None or detected == given:
         return None
     if given is None:
         check = ("; on a platform with steered wheels or legs it can over-correct: compare "
                  "the two fits") if constrained else ""
+        also = ("; at this rate with --smoother quartic --input-delay auto, which keep the "
+                "LOESS's bias out of a long log's values") if quartic else ""
         return (f"{source}: the angles move by whole counts of 2π/{detected}; give "
                 f"--encoder-counts {detected} to correct the fit for the encoders' "
-                f"quantisation (its errors in the accelerations shrink the values){check}")
+                f"quantisation (its errors in the accelerations shrink the values){also}{check}")
     return (f"{source}: the angles move by whole counts of 2π/{detected}, not of the "
             f"--encoder-counts {given} given; check the encoders' resolution")

@@ -236,6 +236,38 @@ def test_the_fits_gram_thins_a_long_logs_later_rows(monkeypatch, tmp_path):
     assert 0 < shift.max() < 0.2, shift.max()
 
 
+def test_counts_note_names_the_quartic_where_the_span_allows(off_square, runs_off_square,
+                                                              tmp_path):
+    """A quantised 200 Hz log (21 samples in the 0.1 s span) fitted plain: the note asks for
+    --encoder-counts and, at that rate, the quartic with the lag searched (in memory and
+    streamed); with a 0.05 s span (11 samples), with the quartic, or with the counts given,
+    not."""
+    from ropod_sysid.fit import FitOptions, fit_files
+    from ropod_sysid.io import write_log
+    from ropod_sysid.regressor import Span
+    from ropod_sysid.simulate import sensed
+
+    log = sensed(runs_off_square[0].log, off_square, Sensors(encoder_counts=2**14),
+                 np.random.default_rng(1))
+    path = tmp_path / "q.csv"
+    write_log(log, path)
+    ask = ("give --encoder-counts 16384 to correct the fit for the encoders' quantisation (its "
+           "errors in the accelerations shrink the values); at this rate with --smoother "
+           "quartic --input-delay auto, which keep the LOESS's bias out of a long log's values")
+
+    def notes(fit) -> str:
+        return " | ".join(n for lf in fit.logs for n in lf.notes)
+
+    assert ask in notes(fit_logs([log], off_square))
+    assert ask in notes(fit_files([path], off_square, FitOptions(), chunk=500))
+    for opts in (FitOptions(span=Span.parse("0.05s")),
+                 FitOptions(span=Span.parse(None).with_smoother("quartic"))):
+        text = notes(fit_logs([log], off_square, opts))
+        assert "give --encoder-counts 16384" in text and "--smoother quartic" not in text
+    assert "whole counts" not in notes(fit_logs([log], off_square,
+                                                FitOptions(encoder_counts=2**14)))
+
+
 def test_encoder_counts_are_detected_from_the_angles_steps_not_from_a_writers_rounding():
     """Angles that move by whole counts of 2π/16384 are recognised as 16384-count encoders
     (wrapped channels taken modulo 2π); exact angles, and exact angles a log writer rounded to

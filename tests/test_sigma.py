@@ -281,7 +281,8 @@ def test_delay_search_on_quantised_logs_corrects_for_the_detected_counts(off_squ
     assert any("give --encoder-counts 16384 to correct the fit" in n for n in notes)
     assert any("the search corrected its criterion for the quantisation of the 16384-count "
                "encoders" in n for n in notes)
-    assert not any("--input-delay auto" in n for n in fixed.logs[0].notes)
+    assert not any(n.startswith("--input-delay auto") or "the search corrected" in n
+                   for n in fixed.logs[0].notes)  # (the counts note may advise it)
     extras = auto.parameter_file().extras
     assert extras["input_delay_search_counts"] == [2**14] and "encoder_counts" not in extras
     # streamed in chunks: the gram of the same rows (the search's stride) as the whole log's
