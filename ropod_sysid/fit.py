@@ -36,7 +36,6 @@ from ropod_sysid.params import (
 from ropod_sysid.platform import Platform
 from ropod_sysid.quantisation import counts_note, detect_encoder_counts
 from ropod_sysid.regressor import (
-    QUARTIC_MIN_SAMPLES,
     DelayBracket,
     Span,
     check_input_delay,
@@ -536,7 +535,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
             detected = detect_encoder_counts(log.angles[:, enc],
                                              np.asarray(platform.layout.wrapped)[enc])
             note = counts_note(log.source, detected, options.encoder_counts, model.constrained,
-                               pre.degree == 2 and pre.span_samples >= QUARTIC_MIN_SAMPLES)
+                               options.span.quartic_would_fit(pre.dt))
             search = detected if isinstance(delay, DelayBracket) else None  # (as the stream's)
             out.append((log.source, triangles(model, pre, options.friction,
                                               encoder_counts=options.encoder_counts,

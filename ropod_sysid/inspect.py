@@ -34,7 +34,7 @@ from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import base_twist, unwrap_angles
 from ropod_sysid.platform import Platform
 from ropod_sysid.quantisation import detect_encoder_counts
-from ropod_sysid.regressor import QUARTIC_MIN_SAMPLES, Span
+from ropod_sysid.regressor import Span
 
 _DROPPED = re.compile(r"dropped (\d+) of \d+ smart-wheel frames")
 
@@ -183,8 +183,7 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     enc = lay.encoders
     counts = (detect_encoder_counts(log.angles[:, enc], np.asarray(lay.wrapped)[enc])
               if n else None)
-    span = Span.parse(None).samples(dt_med, n) if dt_med > 0 else 0
-    options, advice = fit_suggestion(counts, span, model.constrained)
+    options, advice = fit_suggestion(counts, Span.parse(None), dt_med, model.constrained)
     return Inspection(
         source=log.source, units=list(log.units), samples=n, duration=duration, rate=rate,
         dt_median=dt_med, jitter=jitter, gap_count=int(gap_idx.size), gaps=gaps,
@@ -196,22 +195,22 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
     )
 
 
-def fit_suggestion(counts: int | None, span_samples: int, constrained: bool = False
+def fit_suggestion(counts: int | None, span: Span, dt: float, constrained: bool = False
                    ) -> tuple[list[str], str]:
-    """The fit options a log calls for, and why: ``--encoder-counts`` for angles that move by
-    whole ``counts`` per revolution (its quantisation shrinks a plain fit's values), and with
-    them, where the default span holds ``span_samples`` ≥
-    :data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES`, the quartic smoother with the drives'
-    lag searched (the LOESS's discretisation bias, which σ does not include, outgrows a long
+    """The fit options a log of sample time ``dt`` [s] calls for, and why: ``--encoder-counts``
+    for angles that move by whole ``counts`` per revolution (its quantisation shrinks a plain
+    fit's values), and with them, where the ``span`` holds the quartic smoother's samples
+    (:meth:`ropod_sysid.regressor.Span.quartic_would_fit`), the quartic with the drives' lag
+    searched (the LOESS's discretisation bias, which σ does not include, outgrows a long
     log's σ). Nothing for angles not on a count grid: the quartic passes more of an unknown
     noise. ``constrained``: steered wheels or legs, where the correction can over-correct."""
     if counts is None:
         return [], ""
     options = [f"--encoder-counts {counts}"]
     why = "to correct for the encoders' quantisation, which shrinks a plain fit's values"
-    if span_samples >= QUARTIC_MIN_SAMPLES:
+    if span.quartic_would_fit(dt):
         options += ["--smoother quartic", "--input-delay auto"]
-        why += (f"; the 0.1 s span holds {span_samples} samples, enough for the quartic "
+        why += (f"; the {span} span holds {span.samples(dt, 0)} samples, enough for the quartic "
                 "smoother's five-point differences, which keep the LOESS's bias out of a long "
                 "log's values (with the drives' lag searched)")
     if constrained:

@@ -349,7 +349,8 @@ def gram_stride(span_rows: int) -> int:
 # weighted so (fit_error_gram's sparse_after). A long log's gram is a sum over many rows of a
 # function of the motion; its later rows sampled 4x sparser moved every value of a 10-minute
 # 1 kHz log's corrected fit (ten recordings of one 60 s run, benchmarks/longlog.py's) by at most
-# 0.11σ (median 0.04σ) and took the fit from 4.1 to 1.9 s; logs of up to 2,000 gram rows, the
+# 0.11σ (median 0.04σ) and took the fit from 4.1 to 1.9 s in process (the command 4.25 to
+# 2.1–2.2 s; plain 1.1 s); logs of up to 2,000 gram rows, the
 # shipped samples', are untouched
 FIT_GRAM_DENSE = 2000
 # the delay search's gram of counts detected in a log (not given): on every this-many-th of the

@@ -192,6 +192,12 @@ class Span:
         k = max(int(round(k)), 3)
         return k if k % 2 else k + 1
 
+    def quartic_would_fit(self, dt: float) -> bool:
+        """A LOESS span that holds the quartic smoother's :data:`QUARTIC_MIN_SAMPLES` at sample
+        time ``dt``: where the fit's notes, its verdict and ``inspect`` name the quartic (with
+        the correction, it keeps the LOESS's discretisation bias out of long logs)."""
+        return self.degree == 2 and dt > 0 and self.samples(dt, 0) >= QUARTIC_MIN_SAMPLES
+
     def __str__(self) -> str:
         return f"{self.value:g}s" if self.seconds else f"{int(self.value)} samples"
 

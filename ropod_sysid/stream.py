@@ -76,7 +76,6 @@ from ropod_sysid.params import DynamicParameters, Friction, friction_of, paramet
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.regressor import (
-    QUARTIC_MIN_SAMPLES,
     DelayBracket,
     Preprocessed,
     RowGrid,
@@ -384,9 +383,8 @@ class _Run:
             enc = log.layout.encoders
             detected = detect_encoder_counts(log.angles[:, enc],
                                              np.asarray(log.layout.wrapped)[enc])
-            span = self.blocks.span
-            quartic = (span.degree == 2 and log.n_samples > 1 and span.samples(
-                float(np.median(np.diff(log.t))), 0) >= QUARTIC_MIN_SAMPLES)
+            quartic = log.n_samples > 1 and self.blocks.span.quartic_would_fit(
+                float(np.median(np.diff(log.t))))
             note = counts_note(self.name, detected, self.blocks.encoder_counts,
                                self.blocks.model.constrained, quartic)
             if note is not None:

@@ -10,7 +10,6 @@ import numpy as np
 from ropod_sysid.fit import FitResult
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
-from ropod_sysid.regressor import QUARTIC_MIN_SAMPLES
 from ropod_sysid.solve import Solution
 from ropod_sysid.validate import LogValidation
 
@@ -68,11 +67,9 @@ def _loess_caveat(result: FitResult) -> str:
     where the quartic smoother is an option (every log's span at least
     :data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES` samples)."""
     o = result.options
-    if o.span.degree != 2 or not result.logs:
-        return ""
-    spans = [o.span.samples(lf.triangles.duration / lf.samples, lf.samples)
-             for lf in result.logs if lf.samples and lf.triangles.duration > 0]
-    if not spans or min(spans) < QUARTIC_MIN_SAMPLES:
+    logs = [lf for lf in result.logs if lf.samples and lf.triangles.duration > 0]
+    if not logs or not all(o.span.quartic_would_fit(lf.triangles.duration / lf.samples)
+                           for lf in logs):
         return ""
     rel = relative_std(result)
     inertial = [j for j, n in enumerate(result.shown.names)

@@ -127,6 +127,7 @@ def test_inspect_says_how_to_fit_quantised_angles(off_square, runs_off_square):
     span) the quartic smoother with the lag searched; at 100 Hz (11 samples) the correction
     alone; on a constrained platform the over-correction caveat."""
     from ropod_sysid.inspect import fit_suggestion
+    from ropod_sysid.regressor import Span
     from ropod_sysid.simulate import Sensors, sensed
 
     log = sensed(runs_off_square[0].log, off_square, Sensors(encoder_counts=2**14),
@@ -138,15 +139,20 @@ def test_inspect_says_how_to_fit_quantised_angles(off_square, runs_off_square):
     text = format_inspection(ins)
     assert "encoders   the angles move by whole counts of 2π/16384\n" in text
     assert ("fit with   --encoder-counts 16384 --smoother quartic --input-delay auto (to correct "
-            "for the encoders' quantisation, which shrinks a plain fit's values; the 0.1 s span "
+            "for the encoders' quantisation, which shrinks a plain fit's values; the 0.1s span "
             "holds 21 samples, enough for the quartic smoother's five-point differences, which "
             "keep the LOESS's bias out of a long log's values (with the drives' lag searched))"
             in text)
-    assert fit_suggestion(2**14, 11)[0] == ["--encoder-counts 16384"]
-    assert fit_suggestion(2**14, 17)[0][1:] == ["--smoother quartic", "--input-delay auto"]
-    assert fit_suggestion(2**14, 11, constrained=True)[1].endswith(
+    span = Span.parse(None)
+    assert fit_suggestion(2**14, span, 0.01)[0] == ["--encoder-counts 16384"]  # 11 samples
+    assert fit_suggestion(2**14, span, 0.1 / 17)[0][1:] == ["--smoother quartic",
+                                                            "--input-delay auto"]
+    assert fit_suggestion(2**14, span, 0.1 / 15)[0] == ["--encoder-counts 16384"]
+    assert fit_suggestion(2**14, span.with_smoother("quartic"), 0.001)[0] == [
+        "--encoder-counts 16384"]  # the quartic already
+    assert fit_suggestion(2**14, span, 0.01, constrained=True)[1].endswith(
         "; with steered wheels or legs the correction can over-correct: compare a plain fit")
-    assert fit_suggestion(None, 101) == ([], "")
+    assert fit_suggestion(None, span, 0.001) == ([], "")
 
 
 def test_inspect_finds_gaps_and_the_criteria_decide(off_square, runs_off_square):
