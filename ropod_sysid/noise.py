@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -63,6 +63,9 @@ from ropod_sysid.quantisation import encoder_variance, sawtooth_share, tone_shar
 from ropod_sysid.regressor import DEFAULT_SPAN_S, RowGrid
 
 if TYPE_CHECKING:
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.params import Friction
+    from ropod_sysid.regressor import Preprocessed
     from ropod_sysid.solve import Solution
 
 __all__ = ["MotionRows", "SensorNoise", "encoder_variance", "fit_error_gram", "planned_rows",
@@ -199,32 +202,32 @@ def velocity_kernel(k: int, dt: float, degree: int = 2) -> np.ndarray:
     return np.convolve(signals.loess_kernel(k, degree), difference_kernel(dt, degree))
 
 
-def _encoders(model: object, n_angles: int) -> np.ndarray:
+def _encoders(model: PlatformModel, n_angles: int) -> np.ndarray:
     """(J,) bool: the platform's rotary-encoder channels (:attr:`Layout.encoders`)."""
     layout = getattr(model, "layout", None)
     return np.ones(n_angles, bool) if layout is None else np.asarray(layout.encoders, bool)
 
 
-def measured_rate_channels(model: object, st: object, qdd: np.ndarray,
-                           friction: str) -> list[int]:
+def measured_rate_channels(model: PlatformModel, st: object, qdd: np.ndarray,
+                           friction: Friction) -> list[int]:
     """The angle channels whose measured rate A_ID,ext depends on (the unit types that use
     measured rates: the swivel's pivots), found on a few rows."""
     few = min(8, st.q.shape[0])  # type: ignore[attr-defined]
     q, qd, ang = st.q[:few], st.qd[:few], st.angles[:few]  # type: ignore[attr-defined]
     rates = st.angle_rate[:few]  # type: ignore[attr-defined]
-    base = model.a_id_ext(model.state(q, qd, ang, rates), qdd[:few], friction)  # type: ignore[attr-defined]
+    base = model.a_id_ext(model.state(q, qd, ang, rates), qdd[:few], friction)
     j = rates.shape[1]
     moved = np.tile(rates, (j, 1)).reshape(j, few, j)  # each channel's rate moved, stacked
     moved[np.arange(j), :, np.arange(j)] += 1.0
-    a = model.a_id_ext(model.state(np.tile(q, (j, 1)), np.tile(qd, (j, 1)),  # type: ignore[attr-defined]
+    a = model.a_id_ext(model.state(np.tile(q, (j, 1)), np.tile(qd, (j, 1)),
                                    np.tile(ang, (j, 1)), moved.reshape(j * few, j)),
                        np.tile(qdd[:few], (j, 1)), friction)
     changed = (a.reshape(j, few, -1) != base.reshape(1, few, -1)).any(axis=(1, 2))
     return np.flatnonzero(changed).tolist()
 
 
-def row_variances(model: object, rows: object, params: object, noise: SensorNoise,
-                  friction: str = "per-wheel", encoder: np.ndarray | None = None
+def row_variances(model: PlatformModel, rows: object, params: object, noise: SensorNoise,
+                  friction: Friction = "per-wheel", encoder: np.ndarray | None = None
                   ) -> np.ndarray:
     """Variance (N, D) [N², N², (N m)², …] of each DOF of the equation rows ``rows``
     (:class:`MotionRows`, e.g. :func:`planned_rows`) under ``noise``: current noise through
@@ -236,20 +239,21 @@ def row_variances(model: object, rows: object, params: object, noise: SensorNois
 
     st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
     b_tau = st.b_tau
-    out = np.zeros(b_tau.shape[:2])  # (N, D)
+    out: np.ndarray = np.zeros(b_tau.shape[:2])  # (N, D)
     if noise.current_noise > 0:
         grid = noise.grid
-        k_t = model.platform.torque_constants()  # type: ignore[attr-defined]
+        k_t = model.platform.torque_constants()
         power = float(np.sum(row_kernel(grid, current_kernel(grid)) ** 2))
         out += np.einsum("nda,a->nd", b_tau**2, (k_t * noise.current_noise) ** 2) * power
         if out.shape[1] > 3:  # the fit locks a held joint: its own rows are zero
-            own = model.coordinate_channels  # type: ignore[attr-defined]
-            out[:, 3:][held_joints(model, rows.angle_rates[:, own])] = 0.0  # type: ignore[arg-type, attr-defined]
+            own = model.coordinate_channels
+            out[:, 3:][held_joints(model, rows.angle_rates[:, own])] = 0.0  # type: ignore[attr-defined]
     if noise.encoder_counts is not None:
         if encoder is None:
             truth = params.vector(model.parameter_names(friction))  # type: ignore[attr-defined]
             encoder = recipe_error_gram(model, rows, noise, friction, truth)[1]
-        out += encoder  # type: ignore[operator]
+        assert encoder is not None  # recipe_error_gram gives the variances with truth
+        out += encoder
     return out
 
 
@@ -390,8 +394,8 @@ def search_gram_stride(span_rows: int) -> int:
     return SEARCH_GRAM_SPARSER * gram_stride(span_rows)
 
 
-def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts: int,
-                   friction: str = "per-wheel", first_row: int = 0,
+def fit_error_gram(model: PlatformModel, pre: Preprocessed, index: np.ndarray, encoder_counts: int,
+                   friction: Friction = "per-wheel", first_row: int = 0,
                    stride: int | None = None, tone_nodes: int | None = None,
                    sparse_after: int | None = None) -> np.ndarray:
     """E[δAᵀδA] (3, p, p) of the equation rows at samples ``index`` of a preprocessed block
@@ -405,43 +409,43 @@ def fit_error_gram(model: object, pre: object, index: np.ndarray, encoder_counts
     :data:`SEARCH_GRAM_LATER` × ``stride``-th row, each weighted so; each channel's
     quantisation error as the sawtooth of its motion through the row's window
     (:func:`tone_share`, :func:`window_motion`); ``tone_nodes``: :class:`SensorNoise`'s."""
-    noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,  # type: ignore[attr-defined]
-                        row_step=pre.grid.step, degree=pre.degree,  # type: ignore[attr-defined]
+    noise = SensorNoise(0.0, encoder_counts, 1.0 / pre.dt, span=pre.span_samples * pre.dt,
+                        row_step=pre.grid.step, degree=pre.degree,
                         jitter=float(getattr(pre, "jitter", 0.0)), tone_nodes=tone_nodes)
     index = np.asarray(index)
-    stride = gram_stride(pre.grid.span) if stride is None else max(1, int(stride))  # type: ignore[attr-defined]
+    stride = gram_stride(pre.grid.span) if stride is None else max(1, int(stride))
     row = first_row + np.arange(index.size)
     later = np.zeros(index.size, bool) if sparse_after is None else row >= sparse_after
     sparse = SEARCH_GRAM_LATER * stride
-    p = len(model.parameter_names(friction))  # type: ignore[attr-defined]
+    p = len(model.parameter_names(friction))
     out = np.zeros((3, p, p))
     for rows, every, shift in ((~later, stride, 0), (later, sparse, sparse_after or 0)):
         at = index[rows & ((row - shift) % every == every // 2)]
         if at.size:
-            gram, _ = recipe_error_gram(model, pre.take(at), noise, friction,  # type: ignore[attr-defined]
+            gram, _ = recipe_error_gram(model, pre.take(at), noise, friction,
                                         motion=window_motion(pre, at))
             out += kind_grams(gram) * float(every)
     return out
 
 
-def _turning_channels(model: object, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+def _turning_channels(model: PlatformModel, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """The angle channels the units' constraint rows (odometry) depend on, found on a few
     rows (the steering angles and pivots; not the wheels')."""
     from ropod_sysid.odometry import constraint_system
 
     few = min(8, angles.shape[0])
     j = angles.shape[1]
-    base = constraint_system(model, angles[:few], rates[:few])  # type: ignore[arg-type]
+    base = constraint_system(model, angles[:few], rates[:few])
     moved = np.tile(angles[:few], (j, 1)).reshape(j, few, j)  # each channel moved, stacked
     moved[np.arange(j), :, np.arange(j)] += 0.1
-    new = constraint_system(model, moved.reshape(j * few, j), np.tile(rates[:few], (j, 1)))  # type: ignore[arg-type]
+    new = constraint_system(model, moved.reshape(j * few, j), np.tile(rates[:few], (j, 1)))
     changed = np.zeros(j, bool)
     for x, y in zip(base, new, strict=True):
         changed |= (y.reshape(j, few, -1) != x.reshape(1, few, -1)).any(axis=(1, 2))
     return np.flatnonzero(changed)
 
 
-def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.ndarray,
+def odometry_maps(model: PlatformModel, q: np.ndarray, angles: np.ndarray, rates: np.ndarray,
                   eps: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
     """How the angle channels' errors reach the world-frame q̇ and q̈ (N, D) of the rows
     through odometry: M (N, D, J), δq̇ = M δφ̇ and δq̈ = M δφ̈ + K δφ̇, with K (N, D, J).
@@ -457,8 +461,8 @@ def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.nd
     d = int(getattr(model, "n_dof", 3))
 
     def gain(ang: np.ndarray) -> np.ndarray:  # G (J, N, 3) at the angles (N, J)
-        c, _ = constraint_system(model, ang, np.zeros((n, j)))  # type: ignore[arg-type]
-        _, b = constraint_system(model, np.tile(ang, (j, 1)),  # type: ignore[arg-type]
+        c, _ = constraint_system(model, ang, np.zeros((n, j)))
+        _, b = constraint_system(model, np.tile(ang, (j, 1)),
                                  np.repeat(np.eye(j), n, axis=0))
         ct = np.swapaxes(c, 1, 2)
         rhs = ct @ np.moveaxis(b.reshape(j, n, -1), 0, 2)  # (N, 3, J): Cᵀ D
@@ -473,7 +477,7 @@ def odometry_maps(model: object, q: np.ndarray, angles: np.ndarray, rates: np.nd
         t = turning.size
         ang = np.tile(angles, (t, 1)).reshape(t, n, j)
         ang[np.arange(t), :, turning] += eps
-        c, b = constraint_system(model, ang.reshape(t * n, j), np.tile(rates, (t, 1)))  # type: ignore[arg-type]
+        c, b = constraint_system(model, ang.reshape(t * n, j), np.tile(rates, (t, 1)))
         ct = np.swapaxes(c, 1, 2)
         moved = solve_symmetric3(ct @ c, (ct @ b[..., None])[..., 0]).reshape(t, n, 3)
         body[turning] += (moved - nu) / eps
@@ -514,19 +518,19 @@ class MotionRows:
                           self.angle_rates[index])
 
 
-def planned_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+def planned_rows(model: PlatformModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                  angles: np.ndarray, angle_rates: np.ndarray | None = None) -> MotionRows:
     """The :class:`MotionRows` of a planned motion: q (N, 3), q̇ and q̈ (N, D) (the units' own
     coordinates' rates after the base's), the predicted angles (N, J); ``angle_rates`` (N, J)
     the encoders' rates (None: the rates the base motion implies at the angles, the units' own
     coordinates' from q̇ — what the planned A_ID,ext reads, :meth:`PlatformModel.state`)."""
     if angle_rates is None:
-        angle_rates = model.state(q, qd, angles).angle_rate  # type: ignore[attr-defined]
+        angle_rates = model.state(q, qd, angles).angle_rate
     return MotionRows(q, qd[:, :3], qdd, angles, angle_rates)
 
 
-def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
-                         friction: str = "per-wheel", h: float = 1e-6,
+def recipe_sensitivities(model: PlatformModel, rows: object, noise: SensorNoise,
+                         friction: Friction = "per-wheel", h: float = 1e-6,
                          used: list[int] | None = None,
                          motion: tuple[np.ndarray, np.ndarray] | None = None,
                          ) -> tuple[np.ndarray, list[int]]:
@@ -565,13 +569,14 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
     st_m = model.state(rows.q, rows.qd, rows.angles, rates)  # type: ignore[attr-defined]
     st, qdd = model.consistent_motion(st_m, rows.qdd)  # type: ignore[attr-defined]
     if d > 3:
-        st.held = held_joints(model, rates[:, own])  # type: ignore[arg-type]
+        st.held = held_joints(model, rates[:, own])
     eye = np.broadcast_to(np.eye(d), (n, d, d))
-    con = model.constraints(st_m)  # type: ignore[attr-defined]
+    con = model.constraints(st_m)
     if con is not None:
-        regular = base_singular_ratio(con[0], model.motion_rank) >= SINGULAR_MARGIN  # type: ignore[attr-defined]
+        regular = base_singular_ratio(con[0], model.motion_rank) >= SINGULAR_MARGIN
         p_v = eye - np.linalg.pinv(con[0], rcond=1e-9) @ con[0]
-        g_c, c_c = model.constraints(st)  # type: ignore[attr-defined]
+        # not None: the model is constrained (con above)
+        g_c, c_c = cast(tuple[np.ndarray, np.ndarray], model.constraints(st))
         g_pinv = np.linalg.pinv(g_c, rcond=1e-9)
         p_a = eye - g_pinv @ g_c
         p_v[~regular], p_a[~regular], g_pinv[~regular] = np.eye(d), np.eye(d), 0.0
@@ -580,8 +585,8 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
     m, k = odometry_maps(model, rows.q, rows.angles, rates)  # type: ignore[attr-defined]
 
     # A's linear parts in q̈ (before the identification projector, applied once at the end)
-    a0 = model.a_id_ext(st, np.zeros((n, d)), friction, projected=False)  # type: ignore[attr-defined]
-    a_k = np.stack([model.a_id_ext(st, np.broadcast_to(np.eye(d)[i], (n, d)), friction,  # type: ignore[attr-defined]
+    a0 = model.a_id_ext(st, np.zeros((n, d)), friction, projected=False)
+    a_k = np.stack([model.a_id_ext(st, np.broadcast_to(np.eye(d)[i], (n, d)), friction,
                                    projected=False) - a0 for i in range(d)], axis=1)
     a_c = a0 + (qdd[:, None, :] @ a_k.reshape(n, d, -1)).reshape(a0.shape)
 
@@ -593,8 +598,8 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
     t_map[:, :3] = qd_m[:, :3]
     # every direction's state at once: the model evaluated on (3 + I)·N stacked rows
     n_dir = 3 + len(used)
-    qd_s = np.tile(st.qd, (n_dir, 1))  # type: ignore[attr-defined]
-    rates_s = np.tile(st.angle_rate, (n_dir, 1))  # type: ignore[attr-defined]
+    qd_s = np.tile(st.qd, (n_dir, 1))
+    rates_s = np.tile(st.angle_rate, (n_dir, 1))
     for i in range(n_dir):
         rows_i = slice(i * n, (i + 1) * n)
         if i < 3:
@@ -607,14 +612,14 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
                 t_map[:, i] = qd_m[:, 3 + where[0]]
             else:
                 t_map[:, i, ch] = 1.0
-    st_s = model.state(np.tile(st.q, (n_dir, 1)), qd_s, np.tile(st.angles, (n_dir, 1)),  # type: ignore[attr-defined]
+    st_s = model.state(np.tile(st.q, (n_dir, 1)), qd_s, np.tile(st.angles, (n_dir, 1)),
                        rates_s)
-    a_s = model.a_id_ext(st_s, np.tile(qdd, (n_dir, 1)), friction, projected=False)  # type: ignore[attr-defined]
+    a_s = model.a_id_ext(st_s, np.tile(qdd, (n_dir, 1)), friction, projected=False)
     da = np.moveaxis((a_s.reshape(n_dir, *a_c.shape) - a_c) / h, 0, 1)  # (N, I, D, p)
     if con is not None:
-        c_s = model.constraints(st_s)[1]  # type: ignore[attr-defined]
+        c_s = cast(tuple[np.ndarray, np.ndarray], model.constraints(st_s))[1]  # as con
         dc = np.moveaxis((c_s.reshape(n_dir, *c_c.shape) - c_c) / h, 0, -1)  # (N, C, I)
-    proj = model.identification_projector(st)  # type: ignore[attr-defined]
+    proj = model.identification_projector(st)
     da_all = np.concatenate([a_k, da], axis=1)  # (N, D + I, D, p)
     if proj is not None:
         da_all = proj[:, None] @ da_all
@@ -636,8 +641,8 @@ def recipe_sensitivities(model: object, rows: object, noise: SensorNoise,
 
 
 
-def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
-                      friction: str = "per-wheel", truth: np.ndarray | None = None,
+def recipe_error_gram(model: PlatformModel, rows: object, noise: SensorNoise,
+                      friction: Friction = "per-wheel", truth: np.ndarray | None = None,
                       motion: tuple[np.ndarray, np.ndarray] | None = None,
                       ) -> tuple[np.ndarray, np.ndarray | None]:
     """E[δA_dᵀ δA_d] (D, p, p) summed over the rows ``rows`` (a :class:`Preprocessed` of the
@@ -647,7 +652,7 @@ def recipe_error_gram(model: object, rows: object, noise: SensorNoise,
     δA_d m = Σ_s (W_sd m)², the encoders' share of the rows' noise (None without ``truth``).
     ``motion``: as :func:`recipe_sensitivities`'s, (N, J) each. Zero with exact encoders."""
     n, j = rows.angles.shape  # type: ignore[attr-defined]
-    d, p = int(getattr(model, "n_dof", 3)), len(model.parameter_names(friction))  # type: ignore[attr-defined]
+    d, p = int(getattr(model, "n_dof", 3)), len(model.parameter_names(friction))
     gram = np.zeros((d, p, p))
     var = None if truth is None else np.zeros((n, d))
     if noise.encoder_counts is None:

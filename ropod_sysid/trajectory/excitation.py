@@ -25,6 +25,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.forked import ForkedMap, default_processes
 from ropod_sysid.model.assembly import SINGULAR_MARGIN
 from ropod_sysid.noise import SensorNoise
+from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.fourier import FourierFamily, _scaled_twist
 from ropod_sysid.trajectory.identifiability import (
@@ -100,7 +101,7 @@ class _Objective:
     """Vectorised objective of :func:`optimize` over a population of coefficient vectors."""
 
     def __init__(self, platform: Platform, duration: float, harmonics: int, limits: Limits,
-                 floor: Floor, objective: str, friction: str, grid_rate: float,
+                 floor: Floor, objective: str, friction: Friction, grid_rate: float,
                  eval_rate: float, sigma: SigmaTarget | None = None,
                  processes: int | None = None) -> None:
         from ropod_sysid.model import PlatformModel
@@ -211,7 +212,7 @@ class _Objective:
         st = self.model.state(q[:, :, idx].reshape(-1, 3), qd[:, :, idx].reshape(-1, d),
                               pred.angles[:, :, idx].reshape(n_s * 4 * idx.size, -1))
         qdd_rows = qdd[:, :, idx].reshape(-1, d)
-        a = self.model.a_id_ext(st, qdd_rows, self.friction)  # type: ignore[arg-type]
+        a = self.model.a_id_ext(st, qdd_rows, self.friction)
         # the fraction of samples near singular, whose base rows the fit leaves out
         ratio = self.model.singular_ratio(st)
         singular = (np.zeros(n_s) if ratio is None else
@@ -429,7 +430,7 @@ def optimize(platform: Platform, duration: float = 30.0, harmonics: int = 5,
         raise InputError(f"duration must be between {lo:g} and {hi:g} s, got {duration!r}")
     if isinstance(maxiter, bool) or not isinstance(maxiter, int) or maxiter < 1:
         raise InputError(f"maxiter must be a positive integer, got {maxiter!r}")
-    check_variant(friction)
+    friction = check_variant(friction)  # the same string, typed as a Friction
     t_start = time.monotonic()
     model = PlatformModel(platform)
     sigma = (sigma_target(platform, target, friction, sensors or SensorNoise(), params)

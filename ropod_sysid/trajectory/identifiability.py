@@ -11,11 +11,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ropod_sysid.solve import RCOND, numerical_rank
 from ropod_sysid.trajectory.setpoints import integrate_pose
+
+if TYPE_CHECKING:
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.params import Friction
 
 
 def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = None,
@@ -37,20 +42,20 @@ def _world_motion(t: np.ndarray, twist: np.ndarray, rates: np.ndarray | None = N
     return q, qd, qdd
 
 
-def with_own_coordinates(model: object, t: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+def with_own_coordinates(model: PlatformModel, t: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
                          rates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The generalized velocity and acceleration (…, N, D) of planned motions: the base's
     (…, N, 3) followed by the units' own coordinates' (the steered wheels' β̇ from the
     predicted angle rates (…, N, J), β̈ by differences over t); unchanged without any."""
-    if model.n_dof == 3:  # type: ignore[attr-defined]
+    if model.n_dof == 3:
         return qd, qdd
-    own = rates[..., model.coordinate_channels]  # type: ignore[attr-defined, index]
+    own = rates[..., model.coordinate_channels]
     acc = np.gradient(own, t, axis=-2) if own.shape[-2] > 1 else np.zeros_like(own)
     return np.concatenate([qd, own], axis=-1), np.concatenate([qdd, acc], axis=-1)
 
 
-def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                    angles: np.ndarray, friction: str, chunk: int = 20000,
+def _regressor_rows(model: PlatformModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                    angles: np.ndarray, friction: Friction, chunk: int = 20000,
                     noise: tuple[object, object] | None = None,
                     angle_rates: np.ndarray | None = None,
                     motion: tuple[np.ndarray, np.ndarray] | None = None,
@@ -75,12 +80,12 @@ def _regressor_rows(model: object, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
     for k in range(0, q.shape[0], chunk):
         sl = slice(k, k + chunk)
         rates = None if angle_rates is None else angle_rates[sl]
-        st = model.state(q[sl], qd[sl], angles[sl], rates)  # type: ignore[attr-defined]
+        st = model.state(q[sl], qd[sl], angles[sl], rates)
         if qd.shape[1] > 3:  # the fit locks a unit's own joint while it is held
             from ropod_sysid.regressor import held_joints
 
-            st.held = held_joints(model, qd[sl, 3:])  # type: ignore[arg-type]
-        a = model.a_id_ext(st, qdd[sl], friction)  # type: ignore[attr-defined]
+            st.held = held_joints(model, qd[sl, 3:])
+        a = model.a_id_ext(st, qdd[sl], friction)
         out.append(a)
         if noise is not None:
             params, sensors = noise

@@ -17,12 +17,13 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from ropod_sysid.errors import InputError
 from ropod_sysid.noise import SensorNoise, predicted_fit_std, predicted_solution
-from ropod_sysid.params import Parameters
+from ropod_sysid.params import Friction, Parameters
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.curvature import (
     MOVING_SPEED,
@@ -43,6 +44,9 @@ from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Floor, Limits, _check_f
 from ropod_sysid.trajectory.prediction import Prediction, _variant_prediction
 from ropod_sysid.trajectory.run_variants import VARIANTS, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
+
+if TYPE_CHECKING:
+    from ropod_sysid.model import PlatformModel
 
 
 @dataclass
@@ -146,22 +150,23 @@ class SingularReport:
         return out
 
 
-def singular_report(t: np.ndarray, twists: np.ndarray, pred: Prediction, model: object
+def singular_report(t: np.ndarray, twists: np.ndarray, pred: Prediction, model: PlatformModel
                     ) -> SingularReport | None:
     """The :class:`SingularReport` of V = 4 planned motions: base-frame twists (4, N, 3) at
     times t (N,) with their predicted angles; None for a platform without constraint rows.
     Vectorised over variants and samples (:meth:`PlatformModel.singular_ratio`)."""
     from ropod_sysid.model.assembly import SINGULAR_MARGIN
 
-    if not model.constrained:  # type: ignore[attr-defined]
+    if not model.constrained:
         return None
     n_var, n = twists.shape[:2]
     q, qd, _ = _world_motion(t, twists)
-    st = model.state(q.reshape(-1, 3), qd.reshape(-1, 3),  # type: ignore[attr-defined]
+    st = model.state(q.reshape(-1, 3), qd.reshape(-1, 3),
                      pred.angles.reshape(n_var * n, -1), pred.rates.reshape(n_var * n, -1))
-    ratio = model.singular_ratio(st).reshape(n_var, n)  # type: ignore[attr-defined]
+    # not None: the model is constrained (above)
+    ratio = cast(np.ndarray, model.singular_ratio(st)).reshape(n_var, n)
     near = ratio < SINGULAR_MARGIN
-    moving = moving_mask(twists, model.platform.positions)  # type: ignore[attr-defined]
+    moving = moving_mask(twists, model.platform.positions)
     w = np.gradient(t) if n > 1 else np.ones(1)  # the time each sample stands for [s]
     frac = (near * w).sum(axis=1) / w.sum()
     mov_time = (moving * w).sum(axis=1)
@@ -181,7 +186,8 @@ def singular_report(t: np.ndarray, twists: np.ndarray, pred: Prediction, model: 
             if mine.size:
                 best = mine[np.argmax(span[mine])]
                 longest[v], start[v] = span[best], t[i_on[best]]
-    return SingularReport(SINGULAR_MARGIN, MOVING_SPEED, int(model.motion_rank),  # type: ignore[attr-defined]
+    # motion_rank is not None: the model is constrained (above)
+    return SingularReport(SINGULAR_MARGIN, MOVING_SPEED, int(cast(int, model.motion_rank)),
                           frac, mov_frac, longest, start, ratio.min(axis=1))
 
 
@@ -483,7 +489,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
 
     limits = limits or Limits()
     floor = _check_floor(floor)
-    check_variant(friction)
+    friction = check_variant(friction)  # the same string, typed as a Friction
     if not (noise > 0 and math.isfinite(noise)):
         raise InputError(f"noise must be a positive number (N, N m), got {noise!r}")
     truth = true_parameters(platform, params)
@@ -529,7 +535,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
              "wheel_rate": float(wheel.max(initial=0.0))}
     singular = singular_report(fine.t, twists, pred, model)
     # the stacked regressor along the planned motion (unit angles as predicted)
-    names = parameter_names(platform, friction)  # type: ignore[arg-type]
+    names = parameter_names(platform, friction)
     true_values = truth.vector(names)
     s_hat = math.nan
     bias = np.full(len(names), np.nan)
@@ -537,7 +543,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
         std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
     else:
-        (a, var, gram), dt_eval = stacked_regressor(fine, twists, pred, model,  # type: ignore[misc]
+        (a, var, gram), dt_eval = stacked_regressor(fine, twists, pred, model,
                                                     friction, eval_rate, noise=(truth, sensors))
         std, bias, s_hat, _ = predicted_fit_std(a, var, true_values, sensors,
                                                 sensors.rows_per_second * dt_eval, gram)
@@ -592,8 +598,8 @@ def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
     return out
 
 
-def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, model: object,
-                      friction: str, eval_rate: float = 20.0,
+def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, model: PlatformModel,
+                      friction: Friction, eval_rate: float = 20.0,
                       noise: tuple[object, SensorNoise] | None = None) -> tuple[np.ndarray, float]:
     """A_ID,ext (4M, 3, p) of the four variants (twists (4, N, 3) on the grid of ``fine``,
     predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for.

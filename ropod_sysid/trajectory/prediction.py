@@ -12,12 +12,16 @@ and names no joint.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ropod_sysid.platform import Platform
 from ropod_sysid.trajectory.run_variants import variants
 from ropod_sysid.trajectory.setpoints import Trajectory, _fine
+
+if TYPE_CHECKING:
+    from ropod_sysid.model import PlatformModel
 
 
 @dataclass
@@ -93,7 +97,7 @@ def steering_points(platform: Platform) -> np.ndarray | None:
     return platform.positions[idx] if idx else None
 
 
-def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
+def predict_angles(t: np.ndarray, twists: np.ndarray, model: PlatformModel | Platform,
                    initial: np.ndarray | None = None, twist_rates: np.ndarray | None = None,
                    planned: np.ndarray | None = None) -> Prediction:
     """Every group's angles along base-frame twists (…, N, 3) at times t (N,).
@@ -156,7 +160,7 @@ def predict_angles(t: np.ndarray, twists: np.ndarray, model: object,
                       steering_units, wheel_actuators)
 
 
-def _variant_prediction(traj: Trajectory, model: object,
+def _variant_prediction(traj: Trajectory, model: PlatformModel | Platform,
                         ) -> tuple[Trajectory, np.ndarray, Prediction]:
     """The run on the fine grid (the pivot ODE is stiff: :func:`_fine`), the twists (4, N, 3)
     of its four variants there and their predicted angles."""
@@ -165,7 +169,7 @@ def _variant_prediction(traj: Trajectory, model: object,
     fine = _fine(traj)
     var = variants(fine).values()
     twists = np.stack([vt.twist() for vt in var])
-    columns = (model if isinstance(model, PlatformModel) else PlatformModel(model)  # type: ignore[arg-type]
+    columns = (model if isinstance(model, PlatformModel) else PlatformModel(model)
                ).planned_columns
     planned = np.stack([vt.planned_series(columns) for vt in var]) if columns else None
     return fine, twists, predict_angles(fine.t, twists, model, planned=planned)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -517,11 +518,12 @@ def _regular_manoeuvres(platform: Platform) -> tuple[float | None, tuple[float, 
     return offset, (float(dirs[k, 0]), float(dirs[k, 1]))
 
 
-def _singular_ratio_at(model: object, twists: np.ndarray) -> np.ndarray:
+def _singular_ratio_at(model: PlatformModel, twists: np.ndarray) -> np.ndarray:
     """σ_r/σ_1 of the constraint rows' base block (:meth:`PlatformModel.singular_ratio`) for
     constant base-frame twists (m, 3) at heading 0, every unit at the angles it takes for
     that motion (:meth:`PlatformModel.initial_angles`)."""
-    angles = np.stack([model.initial_angles(tw) for tw in twists])  # type: ignore[attr-defined]
-    st = model.state(np.zeros_like(twists), twists, angles,  # type: ignore[attr-defined]
+    angles = np.stack([model.initial_angles(tw) for tw in twists])
+    st = model.state(np.zeros_like(twists), twists, angles,
                      np.zeros_like(angles))
-    return model.singular_ratio(st)  # type: ignore[attr-defined]
+    # not None: the caller (_regular_manoeuvres) passes a constrained model only
+    return cast(np.ndarray, model.singular_ratio(st))
