@@ -41,7 +41,7 @@ def reports_errors(func: F) -> F:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        warnings.formatwarning = one_line_warning  # type: ignore[assignment]
+        warnings.formatwarning = one_line_warning
         try:
             return func(*args, **kwargs)
         except InputError as exc:

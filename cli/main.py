@@ -53,7 +53,7 @@ class LazyGroup(click.Group):
 
     def make_context(self, info_name: str | None, args: list[str],
                      parent: click.Context | None = None, **extra: Any) -> click.Context:
-        warnings.formatwarning = one_line_warning  # type: ignore[assignment]
+        warnings.formatwarning = one_line_warning
         try:
             return super().make_context(info_name, args, parent, **extra)
         except click.UsageError as exc:

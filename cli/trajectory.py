@@ -320,7 +320,7 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
                    f"{result.condition_number:.4g} (rank {result.rank}, identifiable "
                    f"subspace), {result.evaluations} candidates in {result.seconds:.1f} s")
         if result.targets:
-            click.echo(f"predicted for {sensors.describe()} (trajectory check): "  # type: ignore[union-attr]
+            click.echo(f"predicted for {sensors.describe()} (trajectory check): "
                        + ", ".join(f"{n} σ {100 * r:.3g} %, bias "
                                    f"{100 * result.target_bias[n]:+.3g} %"
                                    for n, r in result.targets.items()))

@@ -92,7 +92,7 @@ def delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
         return sol.sigma2
 
     # the logs' nodes (their sample times may differ by rounding: merged within 1 µs)
-    nodes = np.unique(np.round(np.concatenate([s.delays for s in systems]), 6))  # type: ignore[arg-type]
+    nodes = np.unique(np.round(np.concatenate([s.delays for s in systems]), 6))
     if any(s.error_gram is not None for s in systems):
         delay = corrected_delay(systems, nodes, names, options)
     else:

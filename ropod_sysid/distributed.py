@@ -48,7 +48,7 @@ def _serial(func: Callable[..., Any], items: Sequence[Any], quiet: bool = True,
 
 def _task(func: Callable[..., Any], item: Any, **kwargs: Any) -> Any:
     """One task on a worker, whose warnings (e.g. numpy's) print as one line, as here."""
-    warnings.formatwarning = one_line_warning  # type: ignore[assignment]
+    warnings.formatwarning = one_line_warning
     return func(item, **kwargs)
 
 

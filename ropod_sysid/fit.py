@@ -282,7 +282,7 @@ class FitResult:
                 sol.names, shown.values, shown.at_bound, strict=True) if a}
             if shown.note:
                 extras["physical_note"] = shown.note
-        return ParameterFile(self.platform.name, params,  # type: ignore[arg-type]
+        return ParameterFile(self.platform.name, params,
                              {"translation": rms["translation"], "rotation": rms["rotation"]},
                              sol.condition_number, sol.rank, self.samples, extras)
 
@@ -357,7 +357,7 @@ def parameters_of(pfile: ParameterFile, platform: Platform, where: str,
         raise InputError(f"{where}: key 'friction' is {declared!r}; use per-wheel, shared or "
                          "body")
     shared = friction_names(platform, "shared")
-    friction: Friction = declared or (  # type: ignore[assignment]
+    friction: Friction = declared or (
         "body" if friction_of(values) == "body" else
         "shared" if any(k in values for k in shared) else "per-wheel")
     units = platform.unit_names

@@ -226,9 +226,9 @@ def measured_rate_channels(model: PlatformModel, st: object, qdd: np.ndarray,
     return np.flatnonzero(changed).tolist()
 
 
-def row_variances(model: PlatformModel, rows: object, params: object, noise: SensorNoise,
-                  friction: Friction = "per-wheel", encoder: np.ndarray | None = None
-                  ) -> np.ndarray:
+def row_variances(model: PlatformModel, rows: Preprocessed | MotionRows, params: object,
+                  noise: SensorNoise, friction: Friction = "per-wheel",
+                  encoder: np.ndarray | None = None) -> np.ndarray:
     """Variance (N, D) [N², N², (N m)², …] of each DOF of the equation rows ``rows``
     (:class:`MotionRows`, e.g. :func:`planned_rows`) under ``noise``: current noise through
     B_τ, the torque average and the rows' LOESS (module docstring; zero on the own rows of a
@@ -237,7 +237,7 @@ def row_variances(model: PlatformModel, rows: object, params: object, noise: Sen
     formed). ``params`` the true values (:class:`~ropod_sysid.params.DynamicParameters`)."""
     from ropod_sysid.regressor import held_joints
 
-    st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)  # type: ignore[attr-defined]
+    st = model.state(rows.q, rows.qd, rows.angles, rows.angle_rates)
     b_tau = st.b_tau
     out: np.ndarray = np.zeros(b_tau.shape[:2])  # (N, D)
     if noise.current_noise > 0:
@@ -247,7 +247,7 @@ def row_variances(model: PlatformModel, rows: object, params: object, noise: Sen
         out += np.einsum("nda,a->nd", b_tau**2, (k_t * noise.current_noise) ** 2) * power
         if out.shape[1] > 3:  # the fit locks a held joint: its own rows are zero
             own = model.coordinate_channels
-            out[:, 3:][held_joints(model, rows.angle_rates[:, own])] = 0.0  # type: ignore[attr-defined]
+            out[:, 3:][held_joints(model, rows.angle_rates[:, own])] = 0.0
     if noise.encoder_counts is not None:
         if encoder is None:
             truth = params.vector(model.parameter_names(friction))  # type: ignore[attr-defined]
@@ -529,7 +529,7 @@ def planned_rows(model: PlatformModel, q: np.ndarray, qd: np.ndarray, qdd: np.nd
     return MotionRows(q, qd[:, :3], qdd, angles, angle_rates)
 
 
-def recipe_sensitivities(model: PlatformModel, rows: object, noise: SensorNoise,
+def recipe_sensitivities(model: PlatformModel, rows: Preprocessed | MotionRows, noise: SensorNoise,
                          friction: Friction = "per-wheel", h: float = 1e-6,
                          used: list[int] | None = None,
                          motion: tuple[np.ndarray, np.ndarray] | None = None,
@@ -561,13 +561,13 @@ def recipe_sensitivities(model: PlatformModel, rows: object, noise: SensorNoise,
     from ropod_sysid.model.assembly import SINGULAR_MARGIN, base_singular_ratio
     from ropod_sysid.regressor import at_rest, held_joints
 
-    n, j = rows.angles.shape  # type: ignore[attr-defined]
+    n, j = rows.angles.shape
     d = int(getattr(model, "n_dof", 3))
     enc = _encoders(model, j)
     own = np.asarray(getattr(model, "coordinate_channels", np.zeros(0, int)), int)
-    rates = rows.angle_rates  # type: ignore[attr-defined]
-    st_m = model.state(rows.q, rows.qd, rows.angles, rates)  # type: ignore[attr-defined]
-    st, qdd = model.consistent_motion(st_m, rows.qdd)  # type: ignore[attr-defined]
+    rates = rows.angle_rates
+    st_m = model.state(rows.q, rows.qd, rows.angles, rates)
+    st, qdd = model.consistent_motion(st_m, rows.qdd)
     if d > 3:
         st.held = held_joints(model, rates[:, own])
     eye = np.broadcast_to(np.eye(d), (n, d, d))
@@ -582,7 +582,7 @@ def recipe_sensitivities(model: PlatformModel, rows: object, noise: SensorNoise,
         p_v[~regular], p_a[~regular], g_pinv[~regular] = np.eye(d), np.eye(d), 0.0
     else:
         p_v = p_a = eye
-    m, k = odometry_maps(model, rows.q, rows.angles, rates)  # type: ignore[attr-defined]
+    m, k = odometry_maps(model, rows.q, rows.angles, rates)
 
     # A's linear parts in q̈ (before the identification projector, applied once at the end)
     a0 = model.a_id_ext(st, np.zeros((n, d)), friction, projected=False)
@@ -632,7 +632,7 @@ def recipe_sensitivities(model: PlatformModel, rows: object, noise: SensorNoise,
     sd = np.concatenate([np.sqrt(channel_variances(noise, rates, 1, motion)),
                          np.sqrt(channel_variances(noise, rates, 2, motion))], axis=1)
     sd[:, np.concatenate([~enc, ~enc])] = 0.0  # a leg's extension is no rotary encoder
-    sd[at_rest(rows)] = 0.0  # type: ignore[arg-type]
+    sd[at_rest(rows)] = 0.0
     coef = coef * sd[:, None, :]
     p = da_all.shape[-1]
     w = np.swapaxes(coef, 1, 2) @ da_all.reshape(n, -1, d * p)  # (N, 2J, D·p)
@@ -641,7 +641,7 @@ def recipe_sensitivities(model: PlatformModel, rows: object, noise: SensorNoise,
 
 
 
-def recipe_error_gram(model: PlatformModel, rows: object, noise: SensorNoise,
+def recipe_error_gram(model: PlatformModel, rows: Preprocessed | MotionRows, noise: SensorNoise,
                       friction: Friction = "per-wheel", truth: np.ndarray | None = None,
                       motion: tuple[np.ndarray, np.ndarray] | None = None,
                       ) -> tuple[np.ndarray, np.ndarray | None]:
@@ -651,7 +651,7 @@ def recipe_error_gram(model: PlatformModel, rows: object, noise: SensorNoise,
     memory (about 64 MB); and with ``truth`` m (p,) the variance (N, D) of each row's error
     δA_d m = Σ_s (W_sd m)², the encoders' share of the rows' noise (None without ``truth``).
     ``motion``: as :func:`recipe_sensitivities`'s, (N, J) each. Zero with exact encoders."""
-    n, j = rows.angles.shape  # type: ignore[attr-defined]
+    n, j = rows.angles.shape
     d, p = int(getattr(model, "n_dof", 3)), len(model.parameter_names(friction))
     gram = np.zeros((d, p, p))
     var = None if truth is None else np.zeros((n, d))
@@ -661,7 +661,7 @@ def recipe_error_gram(model: PlatformModel, rows: object, noise: SensorNoise,
     used = None
     for k in range(0, n, chunk):
         part = None if motion is None else (motion[0][k:k + chunk], motion[1][k:k + chunk])
-        w, used = recipe_sensitivities(model, rows.take(slice(k, k + chunk)), noise,  # type: ignore[attr-defined]
+        w, used = recipe_sensitivities(model, rows.take(slice(k, k + chunk)), noise,
                                        friction, used=used, motion=part)
         x = np.moveaxis(w, 2, 0).reshape(d, -1, p)  # (D, N·2J, p)
         gram += np.swapaxes(x, 1, 2) @ x

@@ -87,7 +87,7 @@ def known_names(platform: Platform) -> list[str]:
     """Every parameter name of the platform under any friction variant."""
     out: list[str] = []
     for v in ("per-wheel", "shared", "body"):
-        out += [n for n in parameter_names(platform, v) if n not in out]  # type: ignore[arg-type]
+        out += [n for n in parameter_names(platform, v) if n not in out]
     return out
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -517,7 +518,18 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
                         span.degree, jitter)
 
 
-def at_rest(pre: Preprocessed) -> np.ndarray:
+class Motion(Protocol):
+    """What :func:`at_rest` reads: a preprocessed log's (:class:`Preprocessed`) or a planned
+    run's (:class:`ropod_sysid.noise.MotionRows`) rates."""
+
+    @property
+    def qd(self) -> np.ndarray: ...  # (M, D) base twist first
+
+    @property
+    def angle_rates(self) -> np.ndarray: ...  # (M, J)
+
+
+def at_rest(pre: Motion) -> np.ndarray:
     """Samples (M,) at which the platform stands still: base speed below
     :data:`REST_SPEED`, turn rate below :data:`REST_TURN` and every unit angle's rate below
     :data:`REST_RATE`."""

@@ -190,7 +190,7 @@ class _Blocks:
         if self.bracket is not None:
             self.delay = self.bracket.nodes(dt)  # b_ID at each node delay
         else:
-            check_input_delay(float(self.delay), self.k * dt)  # type: ignore[arg-type]
+            check_input_delay(float(self.delay), self.k * dt)
         self.c = (self.k - 1) // 2
         self.grid = RowGrid.for_span(self.k, self.row_step, self.span.degree)
         self.halo = self.grid.halo

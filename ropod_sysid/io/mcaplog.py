@@ -524,7 +524,7 @@ def _chunks(path: str | Path, chunk: int, scan: McapScan, stream: Stream, pieces
         decoded += len(rows)
         raw.clear()
         if bad is not None:
-            damage = _undecodable(decoded, stream, exc)   # type: ignore[arg-type]
+            damage = _undecodable(decoded, stream, exc)
             return False
         return True
 

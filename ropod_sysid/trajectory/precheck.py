@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, cast, overload
 
 import numpy as np
 
@@ -543,10 +543,11 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         a, dt_eval = stacked_regressor(fine, twists, pred, model, friction, eval_rate)
         std = predicted_std(a, noise, rows_per_second=log_rate * dt_eval)
     else:
-        (a, var, gram), dt_eval = stacked_regressor(fine, twists, pred, model,
-                                                    friction, eval_rate, noise=(truth, sensors))
-        std, bias, s_hat, _ = predicted_fit_std(a, var, true_values, sensors,
-                                                sensors.rows_per_second * dt_eval, gram)
+        (a, row_var, gram), dt_eval = stacked_regressor(
+            fine, twists, pred, model, friction, eval_rate, noise=(truth, sensors))
+        std, bias, s_hat, _ = predicted_fit_std(
+            a, row_var, true_values, sensors, sensors.rows_per_second * dt_eval,
+            gram if isinstance(gram, np.ndarray) else None)  # (0.0: no rows, no gram)
         log_rate = sensors.log_rate
     cond = conditioning(a)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -598,9 +599,20 @@ def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,
     return out
 
 
-def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, model: PlatformModel,
-                      friction: Friction, eval_rate: float = 20.0,
-                      noise: tuple[object, SensorNoise] | None = None) -> tuple[np.ndarray, float]:
+@overload
+def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction,
+                      model: PlatformModel, friction: Friction, eval_rate: float = 20.0,
+                      noise: None = None) -> tuple[np.ndarray, float]: ...
+@overload
+def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction,
+                      model: PlatformModel, friction: Friction, eval_rate: float = 20.0, *,
+                      noise: tuple[object, SensorNoise]
+                      ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray | float], float]: ...
+def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction,
+                      model: PlatformModel, friction: Friction, eval_rate: float = 20.0,
+                      noise: tuple[object, SensorNoise] | None = None
+                      ) -> tuple[np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray | float],
+                                 float]:
     """A_ID,ext (4M, 3, p) of the four variants (twists (4, N, 3) on the grid of ``fine``,
     predicted angles ``pred``) at ``eval_rate`` [Hz], and the interval [s] each row stands for.
     With ``noise`` = (true parameters, sensors) A is returned with the rows' variances (4M, D)
@@ -616,7 +628,7 @@ def stacked_regressor(fine: Trajectory, twists: np.ndarray, pred: Prediction, mo
                         qdd[:, idx].reshape(-1, d),
                         pred.angles[:, idx].reshape(n_var * idx.size, -1), friction,
                         noise=noise)
-    return a, step * dt  # type: ignore[return-value]
+    return a, step * dt
 
 
 def true_parameters(platform: Platform, params: Mapping[str, float] | None) -> Parameters:
