@@ -200,7 +200,7 @@ def fit_suggestion(counts: int | None, span: Span, dt: float, constrained: bool 
     """The fit options a log of sample time ``dt`` [s] calls for, and why: ``--encoder-counts``
     for angles that move by whole ``counts`` per revolution (its quantisation shrinks a plain
     fit's values), and with them, where the ``span`` holds the quartic smoother's samples
-    (:meth:`ropod_sysid.regressor.Span.quartic_would_fit`), the quartic with the drives' lag
+    (:meth:`ropod_sysid.recipe.Span.quartic_would_fit`), the quartic with the drives' lag
     searched (the LOESS's discretisation bias, which σ does not include, outgrows a long
     log's σ). Nothing for angles not on a count grid: the quartic passes more of an unknown
     noise. ``constrained``: steered wheels or legs, where the correction can over-correct."""

@@ -60,7 +60,7 @@ import numpy as np
 from ropod_sysid import signals
 from ropod_sysid.errors import InputError
 from ropod_sysid.quantisation import encoder_variance, sawtooth_share, tone_share, window_motion
-from ropod_sysid.regressor import DEFAULT_SPAN_S, RowGrid
+from ropod_sysid.recipe import DEFAULT_SPAN_S, RowGrid
 
 if TYPE_CHECKING:
     from ropod_sysid.model import PlatformModel

@@ -285,7 +285,7 @@ def counts_note(source: str, detected: int | None, given: int | None,
     ``constrained``: a platform whose constraint forces the fit projects out (steered wheels,
     legs), where the correction was measured to over-correct on three of four simulated
     platforms (docs/accuracy.md). ``quartic``: a LOESS fit whose span holds the quartic
-    smoother's samples (:data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES`), which with the
+    smoother's samples (:data:`ropod_sysid.recipe.QUARTIC_MIN_SAMPLES`), which with the
     correction keeps the LOESS's bias out of long logs (as ``inspect`` advises:
     :func:`ropod_sysid.inspect.fit_suggestion`). (What ``--input-delay auto`` did with the
     counts is the search's own note: :func:`ropod_sysid.delay.search_counts_note`.)"""

@@ -75,6 +75,7 @@ from ropod_sysid.odometry import OdometryState
 from ropod_sysid.params import DynamicParameters, Friction, friction_of, parameter_names
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
+from ropod_sysid.recipe import delay_reach
 from ropod_sysid.regressor import (
     DelayBracket,
     Preprocessed,
@@ -86,7 +87,6 @@ from ropod_sysid.regressor import (
     check_input_delay,
     check_length,
     check_piece_samples,
-    delay_reach,
     delayed,
     derivatives,
     left_out,

@@ -65,7 +65,7 @@ def _loess_caveat(result: FitResult) -> str:
     """The caveat of a "well determined" (or rank-deficient) verdict whose σ has grown small
     enough that the LOESS's discretisation bias may exceed it (:data:`LOESS_CAVEAT_STD`),
     where the quartic smoother is an option (every log's span at least
-    :data:`ropod_sysid.regressor.QUARTIC_MIN_SAMPLES` samples)."""
+    :data:`ropod_sysid.recipe.QUARTIC_MIN_SAMPLES` samples)."""
     o = result.options
     logs = [lf for lf in result.logs if lf.samples and lf.triangles.duration > 0]
     if not logs or not all(o.span.quartic_would_fit(lf.triangles.duration / lf.samples)
