@@ -34,7 +34,7 @@ from ropod_sysid.params import (
     parameter_names,
 )
 from ropod_sysid.platform import Platform
-from ropod_sysid.quantisation import counts_note, detect_encoder_counts
+from ropod_sysid.quantisation import counts_note, log_encoder_counts
 from ropod_sysid.regressor import (
     DelayBracket,
     Span,
@@ -531,9 +531,7 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
         for log in logs:
             say(f"preprocess {log.source}")
             pre = preprocess(log, platform, options.span, delay, options.row_step)
-            enc = platform.layout.encoders
-            detected = detect_encoder_counts(log.angles[:, enc],
-                                             np.asarray(platform.layout.wrapped)[enc])
+            detected = log_encoder_counts(log)
             note = counts_note(log.source, detected, options.encoder_counts, model.constrained,
                                options.span.quartic_would_fit(pre.dt))
             search = detected if isinstance(delay, DelayBracket) else None  # (as the stream's)

@@ -33,7 +33,7 @@ from ropod_sysid.io.timebase import GAP_RULE, check_times
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import base_twist, unwrap_angles
 from ropod_sysid.platform import Platform
-from ropod_sysid.quantisation import detect_encoder_counts
+from ropod_sysid.quantisation import log_encoder_counts
 from ropod_sysid.regressor import Span
 
 _DROPPED = re.compile(r"dropped (\d+) of \d+ smart-wheel frames")
@@ -180,9 +180,7 @@ def inspect_log(log: Log, platform: Platform, criteria: Criteria | None = None) 
                        f"{dt_med:.3g} s")
     if dropped:
         notes_w.append(f"{dropped} corrupt frame{'s' if dropped > 1 else ''} dropped on reading")
-    enc = lay.encoders
-    counts = (detect_encoder_counts(log.angles[:, enc], np.asarray(lay.wrapped)[enc])
-              if n else None)
+    counts = log_encoder_counts(log) if n else None
     options, advice = fit_suggestion(counts, Span.parse(None), dt_med, model.constrained)
     return Inspection(
         source=log.source, units=list(log.units), samples=n, duration=duration, rate=rate,

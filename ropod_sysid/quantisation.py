@@ -19,11 +19,15 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["counts_note", "detect_encoder_counts", "encoder_variance", "sawtooth_share",
-           "tone_share", "window_motion"]
+if TYPE_CHECKING:
+    from ropod_sysid.io.log import Log
+
+__all__ = ["counts_note", "detect_encoder_counts", "encoder_variance", "log_encoder_counts",
+           "sawtooth_share", "tone_share", "window_motion"]
 
 
 def encoder_variance(counts: int) -> float:
@@ -276,6 +280,13 @@ def detect_encoder_counts(angles: np.ndarray, wrapped: np.ndarray | None = None)
                 and 16 <= round(counts) <= MAX_DETECTED_COUNTS):
             return int(round(counts))
     return None
+
+
+def log_encoder_counts(log: Log) -> int | None:
+    """:func:`detect_encoder_counts` of a log's encoder channels (its layout's ``encoders``;
+    a leg's extension is no rotary encoder), the wrapped ones taken modulo 2π."""
+    enc = log.layout.encoders
+    return detect_encoder_counts(log.angles[:, enc], np.asarray(log.layout.wrapped)[enc])
 
 
 def counts_note(source: str, detected: int | None, given: int | None,

@@ -377,12 +377,10 @@ class _Run:
 
     def push(self, log: Log) -> None:
         if not self.raw:
-            from ropod_sysid.quantisation import counts_note, detect_encoder_counts
+            from ropod_sysid.quantisation import counts_note, log_encoder_counts
 
             self.t0 = float(log.t[0])
-            enc = log.layout.encoders
-            detected = detect_encoder_counts(log.angles[:, enc],
-                                             np.asarray(log.layout.wrapped)[enc])
+            detected = log_encoder_counts(log)
             quartic = log.n_samples > 1 and self.blocks.span.quartic_would_fit(
                 float(np.median(np.diff(log.t))))
             note = counts_note(self.name, detected, self.blocks.encoder_counts,
