@@ -64,13 +64,16 @@ def varied_setpoints(duration: float, rng: np.random.Generator) -> Setpoints:
 
 
 def option_sets(rate: float, noisy: bool) -> dict[str, FitOptions]:
-    """The fits compared: the default, the encoders' correction (noisy logs), and the
-    quartic with the delay search (a span of at least the quartic's samples)."""
+    """The fits compared: the default, the encoders' correction (noisy logs), each with σ
+    widened by the shift to a second recipe (``--recipe-check``), and the quartic with the
+    delay search (a span of at least the quartic's samples)."""
     span = Span.parse(f"{max(0.1, QUARTIC_MIN_SAMPLES / rate):g}s").with_smoother("quartic")
     counts = COUNTS if noisy else None
-    sets = {"default": FitOptions()}
+    sets = {"default": FitOptions(), "--recipe-check": FitOptions(recipe_check=True)}
     if noisy:
         sets["--encoder-counts 16384"] = FitOptions(encoder_counts=COUNTS)
+        sets["--encoder-counts 16384 --recipe-check"] = FitOptions(encoder_counts=COUNTS,
+                                                                   recipe_check=True)
     sets[f"--smoother quartic --span {span}{' --encoder-counts 16384' if noisy else ''} "
          "--input-delay auto"] = FitOptions(encoder_counts=counts, input_delay="auto",
                                            span=span)

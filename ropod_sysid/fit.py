@@ -88,6 +88,7 @@ class FitOptions:
     robust: Robust = "none"  # down-weight stretches with bumps (huber) or collisions (bisquare)
     control_period: float = 0.0  # the drives hold each torque this long (ZOH) [s]
     encoder_counts: int | None = None  # correct for the encoders' errors in A (counts/rev)
+    recipe_check: bool = False  # fold the shift to a second recipe into σ (crosscheck)
 
     def __post_init__(self) -> None:
         """Nonsense values are a one-line :class:`InputError` before any work."""
@@ -144,6 +145,9 @@ class FitResult:
     # the counts detected in the logs whose gram corrected the delay search's criterion (not
     # the fit: --input-delay auto without --encoder-counts, delay.delay_search); () for none
     search_counts: tuple[int, ...] = ()
+    # --recipe-check: each value's shift to the reference fit, and that fit's flags
+    recipe_shift: dict[str, float] | None = None
+    recipe_reference: str = ""
 
     @property
     def names(self) -> list[str]:
@@ -260,6 +264,9 @@ class FitResult:
                if self.options.encoder_counts else {}),
             **({"split_gaps": True} if self.options.split_gaps else {}),
             **({"robust": self.robust_account()} if sol.stretch_weights is not None else {}),
+            **({"recipe_check": {"reference": self.recipe_reference,
+                                 "shift": self.recipe_shift}}
+               if self.recipe_shift is not None else {}),
             "std_basis": shown.std_basis,
             "std_white_noise": {n: None if not np.isfinite(v) else float(v)
                                 for n, v in zip(sol.names, shown.std_white, strict=True)},
@@ -541,7 +548,16 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
                         pre.notes + ([note] if note else []), None))
         return out
 
-    return _fit(reduce, platform, options)
+    result = _fit(reduce, platform, options)
+    if options.recipe_check:
+        from ropod_sysid import crosscheck
+
+        say("reference fit (--recipe-check)")
+        reference = fit_logs(logs, platform,
+                             crosscheck.reference_options(options, crosscheck.log_step(result)),
+                             progress)
+        result = crosscheck.fold_shift(result, reference)
+    return result
 
 
 def fit_files(paths: Sequence[str | Path], platform: Platform,
@@ -588,7 +604,16 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
                         encoder_counts=options.encoder_counts)
             return [piece for pieces in parts for piece in pieces]
 
-        return _fit(reduce, platform, options)
+        result = _fit(reduce, platform, options)
+        if not options.recipe_check:
+            return result
+        from ropod_sysid import crosscheck
+
+        say("reference fit (--recipe-check)")
+        ref_options = crosscheck.reference_options(options, crosscheck.log_step(result))
+    reference = fit_files(paths, platform, ref_options, workers, dask_address, chunk, progress,
+                          quiet)
+    return crosscheck.fold_shift(result, reference)
 
 
 def hold_delay(control_period: float) -> float:

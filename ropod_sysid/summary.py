@@ -44,6 +44,12 @@ def identifiability_verdict(result: FitResult) -> str:
                 f"({sol.names[worst]})")
     ratio = model_error_ratio(result)
     if ratio > MODEL_ERROR_RATIO:
+        if result.recipe_shift is not None:
+            return (f"full rank; the residual is mostly model or discretisation error, not "
+                    f"sensor noise (σ {ratio:.2g}× the white-noise σ), and σ includes each "
+                    f"value's shift to a second recipe (--recipe-check), not a bias both "
+                    f"share; condition number {sol.condition_number:.3g}, worst relative std "
+                    f"{100 * rel[worst]:.1f}% ({sol.names[worst]})")
         return (f"full rank, but the residual is mostly model or discretisation error, not "
                 f"sensor noise (σ {ratio:.2g}× the white-noise σ): values may be biased "
                 f"beyond σ; condition number {sol.condition_number:.3g}, worst relative std "
@@ -67,6 +73,8 @@ def _loess_caveat(result: FitResult) -> str:
     where the quartic smoother is an option (every log's span at least
     :data:`ropod_sysid.recipe.QUARTIC_MIN_SAMPLES` samples)."""
     o = result.options
+    if result.recipe_shift is not None:  # σ holds the shift to the other recipe
+        return ""
     logs = [lf for lf in result.logs if lf.samples and lf.triangles.duration > 0]
     if not logs or not all(o.span.quartic_would_fit(lf.triangles.duration / lf.samples)
                            for lf in logs):
@@ -79,7 +87,7 @@ def _loess_caveat(result: FitResult) -> str:
     counts = "" if o.encoder_counts else " and --encoder-counts where the angles are quantised"
     return ("; σ this small may not cover the LOESS's discretisation bias, common to every log "
             f"of a run (m_b −2.2 % on a 1 kHz run): --smoother quartic with --input-delay "
-            f"auto{counts} removes most of it")
+            f"auto{counts} removes most of it, --recipe-check folds it into σ")
 
 
 def _bias_hint(result: FitResult) -> str:
@@ -93,9 +101,9 @@ def _bias_hint(result: FitResult) -> str:
     if o.input_delay != "auto" and not o.control_period and not result.input_delay:
         wanted.append("--input-delay auto (or the drives' --control-period)")
     if not wanted:
-        return ""
+        return "; --recipe-check folds the recipe's bias into σ"
     return (f"; on clean logs of 200 Hz or more, {' with '.join(wanted)} removes most of a "
-            "discretisation bias")
+            "discretisation bias, --recipe-check folds it into σ")
 
 
 def relative_std(result: FitResult) -> np.ndarray:

@@ -104,11 +104,18 @@ def test_verdict_says_when_model_error_dominates(off_square, runs_off_square,
                               "error"), verdict
     assert verdict.endswith("; on clean logs of 200 Hz or more, --smoother quartic with "
                             "--input-delay auto (or the drives' --control-period) removes most "
-                            "of a discretisation bias"), verdict
+                            "of a discretisation bias, --recipe-check folds it into σ"), verdict
     quartic = fit_logs([r.log for r in runs_off_square], off_square,
                        FitOptions(span=Span.parse(None).with_smoother("quartic"),
                                   control_period=0.001))
     assert "--smoother quartic" not in identifiability_verdict(quartic)
+    checked = fit_logs([r.log for r in runs_off_square], off_square,
+                       FitOptions(recipe_check=True))
+    assert identifiability_verdict(checked).startswith(
+        "full rank; the residual is mostly model or discretisation error, not sensor noise (σ "
+        ), identifiability_verdict(checked)
+    assert ("σ includes each value's shift to a second recipe (--recipe-check), not a bias "
+            "both share") in identifiability_verdict(checked)
     noisy = fit_logs(runs_off_square_noisy, off_square)
     assert model_error_ratio(noisy) < 1.5 < 3 < model_error_ratio(exact)
     assert "discretisation error" not in identifiability_verdict(noisy)
@@ -129,7 +136,8 @@ def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square, runs_
 
     caveat = ("σ this small may not cover the LOESS's discretisation bias, common to every "
               "log of a run (m_b −2.2 % on a 1 kHz run): --smoother quartic with --input-delay "
-              "auto and --encoder-counts where the angles are quantised removes most of it")
+              "auto and --encoder-counts where the angles are quantised removes most of it, "
+              "--recipe-check folds it into σ")
     inertial = [j for j, n in enumerate(fit.names) if n in ("m_b", "Jzz_b", "m_wh", "Jzz_wh",
                                                               "Jrot_w")]
     rel = np.abs(fit.solution.std / fit.solution.values)
@@ -144,7 +152,10 @@ def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square, runs_
         span=Span.parse(None).with_smoother("quartic")))
     assert "LOESS" not in identifiability_verdict(quartic)
     counted = dataclasses.replace(small, options=FitOptions(encoder_counts=2**14))
-    assert identifiability_verdict(counted).endswith("--input-delay auto removes most of it")
+    assert identifiability_verdict(counted).endswith(
+        "--input-delay auto removes most of it, --recipe-check folds it into σ")
+    checked = dataclasses.replace(small, recipe_shift={n: 0.0 for n in fit.names})
+    assert "LOESS" not in identifiability_verdict(checked)  # σ holds the other recipe's shift
     # the symmetric ropod's identifiable combinations (rank deficient) alike
     square = fit_logs([r.log for r in runs_square], ropod_platform())
     rel = np.abs(square.solution.std / square.solution.values)

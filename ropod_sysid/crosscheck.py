@@ -1,0 +1,104 @@
+"""``fit --recipe-check``: fold the recipe's own bias into σ by fitting the logs a second way.
+
+σ (:func:`ropod_sysid.solve.jackknife_covariance`) is the spread of the values over the logs'
+stretches: it sees errors that vary from stretch to stretch and none that every stretch shares.
+On the least-squares solution the stretches' scores sum to zero, so a bias common to them —
+the smoother's and the differences' attenuation of fast transients, the drives' hold — cannot
+show in any statistic of one fit's residuals, and once a log is long σ falls below it
+(``benchmarks/varied.py``: exact 200 Hz runs of 60 s keep 34–100 % of their values within 2σ,
+ten of them jointly 55 %).
+
+The bias can be seen by changing the recipe. The reference fit differentiates the other way —
+the LOESS's three-point differences against the local quartic's five-point ones
+(:class:`ropod_sysid.recipe.Span`) — with the drives' lag searched (``--input-delay auto``)
+unless the hold is given (``--control-period``) or the delay is; everything else (friction
+model, fixed values, the encoders' correction, weights, bounds, ``--robust``) is the fit's own.
+The quartic's span holds at least :data:`ropod_sysid.recipe.QUARTIC_MIN_SAMPLES` samples of
+the slowest log. The two recipes' biases differ, so their difference Δ bounds the larger; each
+parameter's σ becomes √(σ² + Δ²) (:func:`fold_shift`). On noisy logs Δ also holds the two
+recipes' different noise, so σ grows a little where there is no bias (median 1.06–1.17× on
+the benchmark's noisy single runs). What no recipe sees stays out: a bias both share, such as
+point-sampled currents' aliasing (100 Hz logs of the speed loops' ripple).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ropod_sysid.recipe import QUARTIC_MIN_SAMPLES, Span
+
+if TYPE_CHECKING:
+    from ropod_sysid.fit import FitOptions, FitResult
+    from ropod_sysid.solve import Solution
+
+
+def log_step(result: FitResult) -> float:
+    """The longest sample time [s] among the fit's logs (duration over samples covered)."""
+    steps = [lf.triangles.duration / lf.samples for lf in result.logs if lf.samples > 0]
+    return max(steps) if steps else 0.0
+
+
+def reference_span(span: Span, dt: float) -> Span:
+    """The other smoother at ``span``; the quartic's widened to hold
+    :data:`QUARTIC_MIN_SAMPLES` samples at sample time ``dt`` [s]."""
+    if span.degree == 4:
+        return span.with_smoother("loess")
+    if not span.seconds:
+        return Span(max(span.value, QUARTIC_MIN_SAMPLES), False).with_smoother("quartic")
+    # the span's samples are rounded (Span.samples): 16.5 of them make 17; to 10 ms up, which
+    # also covers dt estimated a little long (log_step)
+    need = math.ceil((QUARTIC_MIN_SAMPLES - 0.5) * dt * 100.0 - 1e-9) / 100.0
+    return Span(max(span.value, need), True).with_smoother("quartic")
+
+
+def reference_options(options: FitOptions, dt: float) -> FitOptions:
+    """The reference fit's options (see the module docstring): the other smoother, the lag
+    searched unless the hold or a delay is given, no second check."""
+    search = options.input_delay == "auto" or (options.input_delay == 0.0
+                                               and not options.control_period)
+    return dataclasses.replace(options, span=reference_span(options.span, dt),
+                               input_delay="auto" if search else options.input_delay,
+                               recipe_check=False)
+
+
+def describe(options: FitOptions) -> str:
+    """The reference recipe as ``fit`` flags."""
+    delay = ("--input-delay auto" if options.input_delay == "auto" else
+             f"--control-period {options.control_period:g}" if options.control_period else
+             f"--input-delay {options.input_delay:g}")
+    return f"--smoother {options.span.smoother} --span {options.span} {delay}"
+
+
+def folded(sol: Solution, shift: np.ndarray, reference: str) -> Solution:
+    """``sol`` with σ → √(σ² + Δ²) for the recipe shift Δ (p,) (NaN σ, fixed or at a bound,
+    stay NaN), and its basis saying so."""
+    std = np.sqrt(sol.std**2 + np.nan_to_num(shift) ** 2)
+    return dataclasses.replace(
+        sol, std=std,
+        std_basis=f"{sol.std_basis}; and in quadrature the shift of each value to a fit with "
+                  f"{reference} (--recipe-check: the recipe's bias, which the jackknife does "
+                  "not see)")
+
+
+def fold_shift(result: FitResult, reference: FitResult) -> FitResult:
+    """``result`` with the recipe shift Δ = values − reference values folded into σ (the
+    shown solution's: the bounded one with ``--physical``), and recorded
+    (:attr:`FitResult.recipe_shift`). Values the two fits determine differently (one a
+    combination, the other not) get no shift: they are not the same quantity."""
+    mine, theirs = result.shown, reference.shown
+    same = mine.combination == theirs.combination
+    shift = np.where(same, mine.values - theirs.values, 0.0)
+    shift[[mine.names.index(k) for k in mine.fixed]] = 0.0
+    text = describe(reference.options)
+    out = dataclasses.replace(result, recipe_shift=dict(zip(mine.names, map(float, shift),
+                                                            strict=True)),
+                              recipe_reference=text)
+    if result.physical is not None:
+        out.physical = folded(result.physical, shift, text)
+    else:
+        out.solution = folded(result.solution, shift, text)
+    return out

@@ -1,0 +1,102 @@
+"""fit --recipe-check: the shift to a second recipe folded into σ (ropod_sysid.crosscheck)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from ropod_sysid.cli.main import main
+from ropod_sysid.crosscheck import reference_options
+from ropod_sysid.fit import FitOptions, fit_files, fit_logs
+from ropod_sysid.io.csvlog import write_csv_log
+from ropod_sysid.platform import save_platform
+from ropod_sysid.recipe import Span
+from ropod_sysid.simulate import Setpoints, simulate
+from ropod_sysid.summary import identifiability_verdict
+
+
+def smoothstep(u: np.ndarray) -> np.ndarray:
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+@pytest.fixture(scope="module")
+def varied_run(off_square, truth):
+    """benchmarks/varied.py's run 6: 60 s, its sinusoids' periods and phases drawn (seed 7),
+    logged at 200 Hz, exact. Its default fit keeps 45 % of the 29 values within 2σ."""
+    duration = 60.0
+    t = np.arange(0.0, duration + 0.005, 0.01)
+    fwd = smoothstep(t / 2.0) * smoothstep((duration - 0.5 - t) / 2.0)
+    mix = smoothstep((t - 4.0) / 3.0) * smoothstep((duration - 8.0 - t) / 3.0)
+    period = np.array([5.7520525, 5.62091176, 6.40516705])
+    phase = np.array([0.9705076, 1.68137602, 5.53129006])
+    wave = np.sin(2.0 * np.pi * t[:, None] / period + phase)
+    sp = Setpoints(t, 0.5 * fwd + 0.3 * mix * wave[:, 0], 0.3 * mix * wave[:, 1],
+                   0.8 * mix * wave[:, 2])
+    (run,) = simulate(off_square, truth, [sp], rate=200.0)
+    return run.log
+
+
+def test_reference_recipe():
+    """The other smoother, the lag searched unless the hold or a delay is given; the quartic's
+    span widened to its 17 samples of the slowest log."""
+    ref = reference_options(FitOptions(), 0.005)
+    assert (ref.span, ref.input_delay, ref.recipe_check) == (
+        Span(0.1, True, 4), "auto", False)
+    assert reference_options(FitOptions(), 0.01).span == Span(0.17, True, 4)
+    assert reference_options(FitOptions(span=Span.parse("11")), 0.01).span == Span(17, False, 4)
+    quartic = FitOptions(span=Span.parse("0.2s").with_smoother("quartic"), input_delay="auto")
+    assert reference_options(quartic, 0.01).span == Span(0.2, True, 2)
+    held = reference_options(FitOptions(control_period=0.001, encoder_counts=2**14), 0.005)
+    assert (held.input_delay, held.control_period, held.encoder_counts) == (0.0, 0.001, 2**14)
+    assert reference_options(FitOptions(input_delay=0.002), 0.005).input_delay == 0.002
+
+
+def test_recipe_check_folds_the_shift_into_sigma(off_square, truth, varied_run):
+    """σ² becomes σ² + Δ², Δ the shift to the reference fit; on the varied run, whose LOESS
+    fit is biased beyond its σ (m_b +6.2 %), every value is then within 2σ of the truth."""
+    from ropod_sysid.params import parameter_names
+
+    ref = truth.vector(parameter_names(off_square))
+    plain = fit_logs([varied_run], off_square)
+    checked = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
+    other = fit_logs([varied_run], off_square, reference_options(FitOptions(), 0.005))
+    shift = plain.solution.values - other.solution.values
+    np.testing.assert_array_equal(checked.solution.values, plain.solution.values)
+    np.testing.assert_allclose(checked.solution.std,
+                               np.sqrt(plain.solution.std**2 + shift**2), rtol=1e-12)
+    assert checked.recipe_shift == dict(zip(plain.names, shift.tolist(), strict=True))
+
+    def inside(fit) -> float:
+        return float(np.mean(np.abs(fit.solution.values - ref) < 2 * fit.solution.std))
+
+    assert inside(plain) < 0.5 and inside(checked) == 1.0
+    assert abs(plain.solution.values[0] / ref[0] - 1) > 0.05  # m_b +6.2 %
+    assert "--recipe-check" in checked.solution.std_basis
+    extras = checked.parameter_file().extras["recipe_check"]
+    assert extras["reference"] == "--smoother quartic --span 0.1s --input-delay auto"
+    assert extras["shift"]["m_b"] == pytest.approx(shift[0])
+    # σ wide enough for the bias: the weak combination (J_rot,w) is then weakly determined
+    assert identifiability_verdict(checked).startswith("full rank but weakly determined")
+
+
+def test_recipe_check_of_files_as_of_logs(tmp_path, off_square, varied_run):
+    """The streamed fit (the command's) folds the same shift as the in-memory one, and the
+    parameter file records it."""
+    log = tmp_path / "run.csv"
+    platform = tmp_path / "platform.yaml"
+    write_csv_log(varied_run, log)
+    save_platform(off_square, platform)
+    files = fit_files([log], off_square, FitOptions(recipe_check=True))
+    memory = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
+    np.testing.assert_allclose(files.solution.std, memory.solution.std, rtol=1e-6)
+    out = tmp_path / "params.json"
+    res = CliRunner().invoke(main, ["fit", str(log), "--platform", str(platform), "--out",
+                                   str(out), "--recipe-check", "--quiet"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(out.read_text())
+    assert data["recipe_check"]["reference"].startswith("--smoother quartic")
+    assert data["parameters"]["m_b"]["std"] == pytest.approx(files.solution.std[0], rel=1e-9)
