@@ -70,7 +70,9 @@ def describe(options: FitOptions) -> str:
     delay = ("--input-delay auto" if options.input_delay == "auto" else
              f"--control-period {options.control_period:g}" if options.control_period else
              f"--input-delay {options.input_delay:g}")
-    return f"--smoother {options.span.smoother} --span {options.span} {delay}"
+    span = options.span
+    width = f"{span.value:g}s" if span.seconds else f"{int(span.value)}"
+    return f"--smoother {span.smoother} --span {width} {delay}"
 
 
 def folded(sol: Solution, shift: np.ndarray, reference: str) -> Solution:

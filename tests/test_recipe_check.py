@@ -100,3 +100,16 @@ def test_recipe_check_of_files_as_of_logs(tmp_path, off_square, varied_run):
     data = json.loads(out.read_text())
     assert data["recipe_check"]["reference"].startswith("--smoother quartic")
     assert data["parameters"]["m_b"]["std"] == pytest.approx(files.solution.std[0], rel=1e-9)
+
+
+def test_report_of_a_checked_parameter_file(off_square, varied_run):
+    """A report from the parameter file (no refit) shows its σ as what they are: the basis and
+    the shift come from the file, and the verdict does not ask for --recipe-check again."""
+    from ropod_sysid.report.html import result_from_parameter_file
+
+    checked = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
+    pfile = checked.parameter_file()
+    result, _ = result_from_parameter_file(off_square, [varied_run], pfile)
+    assert result.shown.std_basis == checked.solution.std_basis
+    assert result.recipe_shift == pytest.approx(checked.recipe_shift)
+    assert "--recipe-check folds" not in identifiability_verdict(result)

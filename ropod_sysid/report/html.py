@@ -180,11 +180,18 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
                                   "parameter file")
         elif sol.combination[j]:
             combinations[k] = f"{sol.combinations.get(k, '')} (with these logs)"
+    basis = pfile.extras.get("std_basis")  # what the file's σ are (shown), not these logs'
     solution = dataclasses.replace(sol, values=m, std=std, combination=combination,
-                                   combinations=combinations, fixed=fixed)
+                                   combinations=combinations, fixed=fixed,
+                                   std_basis=basis if isinstance(basis, str) else sol.std_basis)
     per_log = [LogFit(res.source, res.triangles.samples, w, res.triangles.rms(m), res.notes,
                       res.triangles, res.plot) for res, w in zip(streamed, weights, strict=True)]
     result = FitResult(platform, options, solution, per_log, combined_rms(systems, m), delay)
+    check = pfile.extras.get("recipe_check")  # the file's σ hold the shift to a second recipe
+    if isinstance(check, dict) and isinstance(check.get("shift"), dict):
+        result.recipe_shift = {str(k): float(v) for k, v in check["shift"].items()
+                               if isinstance(v, int | float) and not isinstance(v, bool)}
+        result.recipe_reference = str(check.get("reference", ""))
     if pfile.extras.get("physical") is True:
         notes.append("the values are those of a physically consistent (bounded) fit")
     file_rms = [pfile.rms.get(k, math.nan) for k in ("translation", "rotation")]
