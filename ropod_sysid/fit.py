@@ -548,16 +548,8 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
                         pre.notes + ([note] if note else []), None))
         return out
 
-    result = _fit(reduce, platform, options)
-    if options.recipe_check:
-        from ropod_sysid import crosscheck
-
-        say("reference fit (--recipe-check)")
-        reference = fit_logs(logs, platform,
-                             crosscheck.reference_options(options, crosscheck.log_step(result)),
-                             progress)
-        result = crosscheck.fold_shift(result, reference)
-    return result
+    return checked(_fit(reduce, platform, options),
+                   lambda ref: fit_logs(logs, platform, ref, progress), say)
 
 
 def fit_files(paths: Sequence[str | Path], platform: Platform,
@@ -605,14 +597,20 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
             return [piece for pieces in parts for piece in pieces]
 
         result = _fit(reduce, platform, options)
-        if not options.recipe_check:
-            return result
-        from ropod_sysid import crosscheck
+    return checked(result, lambda ref: fit_files(paths, platform, ref, workers, dask_address,
+                                                 chunk, progress, quiet), say)
 
-        say("reference fit (--recipe-check)")
-        ref_options = crosscheck.reference_options(options, crosscheck.log_step(result))
-    reference = fit_files(paths, platform, ref_options, workers, dask_address, chunk, progress,
-                          quiet)
+
+def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
+            say: Callable[[str], None]) -> FitResult:
+    """With ``--recipe-check``: ``result`` with σ widened by each value's shift to ``refit``
+    under the reference recipe (:mod:`ropod_sysid.crosscheck`); else ``result`` itself."""
+    if not result.options.recipe_check:
+        return result
+    from ropod_sysid import crosscheck
+
+    say("reference fit (--recipe-check)")
+    reference = refit(crosscheck.reference_options(result.options, crosscheck.log_step(result)))
     return crosscheck.fold_shift(result, reference)
 
 
