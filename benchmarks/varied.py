@@ -22,7 +22,10 @@ the smoother's and differences' attenuation of the pivots' transients, the drive
 at 100 and 200 Hz, the speed loops' ripple that point-sampled currents alias. On 60 s runs σ
 is already below those biases, so exact logs keep 31–100 % of their values within 2σ, and
 the joint fits of ten runs 45–86 %; with sensor noise single runs keep 48–100 % and the
-joint fits 48–97 %.
+joint fits 48–97 %. ``--recipe-check`` adds each value's shift to a second recipe to σ: at
+200 Hz and 1 kHz every run alone then keeps 100 % (62–66 % for one 1 kHz run with
+``--encoder-counts``) and the joint fits 93–100 %; at 100 Hz 86–100 % with interval-mean
+currents, 62–100 % with point-sampled ones, whose aliasing both recipes share.
 """
 
 from __future__ import annotations
