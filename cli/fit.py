@@ -191,8 +191,8 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                    "add each value's shift between the two fits to its σ in quadrature: σ then "
                    "includes the recipe's own bias, which the jackknife over stretches cannot "
                    "see (ten varied 60 s runs at 200 Hz and 1 kHz: 100 % of the values within "
-                   "2σ on every run, against 45–100 %; docs/accuracy.md). About twice the "
-                   "time of the fit.")
+                   "2σ on every run, against 34–100 %; with --encoder-counts one run 66 %; "
+                   "docs/accuracy.md). About twice the time of the fit.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
