@@ -37,9 +37,9 @@ if TYPE_CHECKING:
 
 
 def log_step(result: FitResult) -> float:
-    """The longest sample time [s] among the fit's logs (duration over samples covered)."""
-    steps = [lf.triangles.duration / lf.samples for lf in result.logs if lf.samples > 0]
-    return max(steps) if steps else 0.0
+    """The longest sample time [s] among the fit's logs
+    (:attr:`ropod_sysid.fit.LogFit.sample_time`)."""
+    return max((lf.sample_time for lf in result.logs), default=0.0)
 
 
 def reference_span(span: Span, dt: float) -> Span:

@@ -129,6 +129,12 @@ class LogFit:
     triangles: Triangles = field(repr=False)
     plot: LogPlot | None = field(default=None, repr=False)  # what the report draws of it
 
+    @property
+    def sample_time(self) -> float:
+        """The log's sample time [s]: the duration its rows come from over the samples they
+        cover (0 for a log without rows)."""
+        return self.triangles.duration / self.samples if self.samples > 0 else 0.0
+
 
 @dataclass
 class FitResult:

@@ -75,9 +75,8 @@ def _loess_caveat(result: FitResult) -> str:
     o = result.options
     if result.recipe_shift is not None:  # σ holds the shift to the other recipe
         return ""
-    logs = [lf for lf in result.logs if lf.samples and lf.triangles.duration > 0]
-    if not logs or not all(o.span.quartic_would_fit(lf.triangles.duration / lf.samples)
-                           for lf in logs):
+    steps = [lf.sample_time for lf in result.logs if lf.sample_time > 0]
+    if not steps or not all(o.span.quartic_would_fit(dt) for dt in steps):
         return ""
     rel = relative_std(result)
     inertial = [j for j, n in enumerate(result.shown.names)
