@@ -79,7 +79,7 @@ def main() -> None:
                 base = None
                 for method in METHODS:
                     t0 = time.perf_counter()
-                    sol = fit_logs(logs, pf, FitOptions(robust=method)).solution  # type: ignore[arg-type]
+                    sol = fit_logs(logs, pf, FitOptions(robust=method, recipe_check=False)).solution  # type: ignore[arg-type]
                     dt = time.perf_counter() - t0
                     base = dt if base is None else base
                     tv = np.array([truth[n] for n in sol.names])

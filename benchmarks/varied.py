@@ -43,6 +43,7 @@ sys.path.insert(0, str(HERE))
 from excitation import quantised  # noqa: E402
 from run import OFF_SQUARE, smoothstep  # noqa: E402
 
+from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES  # noqa: E402
 from ropod_sysid.fit import FitOptions, fit_logs  # noqa: E402
 from ropod_sysid.params import parameter_names, thesis_fixed_masses  # noqa: E402
 from ropod_sysid.platform import ropod_platform  # noqa: E402
@@ -67,20 +68,30 @@ def varied_setpoints(duration: float, rng: np.random.Generator) -> Setpoints:
 
 
 def option_sets(rate: float, noisy: bool) -> dict[str, FitOptions]:
-    """The fits compared: the default, the encoders' correction (noisy logs), each with σ
-    widened by the shift to a second recipe (``--recipe-check``), and the quartic with the
-    delay search (a span of at least the quartic's samples)."""
+    """The fits compared: the jackknife's σ alone (``--no-recipe-check``), the encoders'
+    correction (noisy logs), each also with σ widened by the shift to a second recipe
+    (``--recipe-check``), and the quartic with the delay search (a span of at least the
+    quartic's samples). ``fit``'s default is the check on logs of up to
+    :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples (:func:`default_is`)."""
     span = Span.parse(f"{max(0.1, QUARTIC_MIN_SAMPLES / rate):g}s").with_smoother("quartic")
     counts = COUNTS if noisy else None
-    sets = {"default": FitOptions(), "--recipe-check": FitOptions(recipe_check=True)}
+    sets = {"--no-recipe-check": FitOptions(recipe_check=False),
+            "--recipe-check": FitOptions(recipe_check=True)}
     if noisy:
-        sets["--encoder-counts 16384"] = FitOptions(encoder_counts=COUNTS)
+        sets["--encoder-counts 16384"] = FitOptions(encoder_counts=COUNTS, recipe_check=False)
         sets["--encoder-counts 16384 --recipe-check"] = FitOptions(encoder_counts=COUNTS,
                                                                    recipe_check=True)
     sets[f"--smoother quartic --span {span}{' --encoder-counts 16384' if noisy else ''} "
          "--input-delay auto"] = FitOptions(encoder_counts=counts, input_delay="auto",
-                                           span=span)
+                                           span=span, recipe_check=False)
     return sets
+
+
+def default_is(logs: list) -> str:
+    """Which of the option sets ``fit``'s default equals on ``logs``: the check runs on logs of
+    up to :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples in all."""
+    samples = sum(len(lg.t) for lg in logs)
+    return "--recipe-check" if samples <= AUTO_MAX_SAMPLES else "--no-recipe-check"
 
 
 def main() -> None:
@@ -112,7 +123,8 @@ def main() -> None:
                          g, f"run{k}")
             noisy.append(quantised(rec, COUNTS, g))
         for kind, logs in (("exact", exact), ("2¹⁴ counts, 30 mA", noisy)):
-            print(f"\n{rate:g} Hz, {kind} logs:")
+            print(f"\n{rate:g} Hz, {kind} logs (fit's default: alone {default_is(logs[:1])}, "
+                  f"joint {default_is(logs)}):")
             for label, opts in option_sets(rate, logs is noisy).items():
                 each = []
                 for lg in logs:

@@ -100,7 +100,7 @@ def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
                 row_step: str = "auto", split_gaps: bool = False,
                 robust: str = "none", control_period: float = 0.0,
                 encoder_counts: int | None = None, smoother: str = "loess",
-                recipe_check: bool = False) -> FitOptions:
+                recipe_check: bool | None = None) -> FitOptions:
     sp = Span.parse(span).with_smoother(smoother)
     return FitOptions(friction=friction,  # type: ignore[arg-type]
                       span=sp, fix=parse_fix(fix),
@@ -108,7 +108,8 @@ def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
                       physical=physical, input_delay=parse_delay(input_delay, sp),  # type: ignore
                       rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps,
                       robust=robust, control_period=control_period,  # type: ignore[arg-type]
-                      encoder_counts=encoder_counts, recipe_check=recipe_check)
+                      encoder_counts=encoder_counts,
+                      recipe_check="auto" if recipe_check is None else recipe_check)
 
 
 def pieces_of(paths: tuple[str, ...], platform: Platform, split_gaps: bool, span: Span | None,
@@ -185,14 +186,16 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                    "for their quantisation, whose errors in the accelerations sit in A_ID,ext "
                    "and shrink the values (corrected least squares; docs/method.md). Costs "
                    "about 2× the fit's time (the shipped sample; 10- and 30-minute 1 kHz logs).")
-@click.option("--recipe-check", is_flag=True,
+@click.option("--recipe-check/--no-recipe-check", default=None,
               help="Fit the logs a second time, differentiated the other way (the quartic for "
                    "the loess, or the loess for the quartic) with the drives' lag searched, and "
                    "add each value's shift between the two fits to its σ in quadrature: σ then "
                    "includes the recipe's own bias, which the jackknife over stretches cannot "
                    "see (ten varied 60 s runs at 200 Hz and 1 kHz: 100 % of the values within "
-                   "2σ on every run, against 34–100 %; with --encoder-counts one run 66 %; "
-                   "docs/accuracy.md). About twice the time of the fit.")
+                   "2σ on every run, against 34–100 % without; with --encoder-counts one run "
+                   "66 %; docs/accuracy.md). About twice the time of the fit. Default: on for "
+                   "logs of up to 150,000 samples in all (the shipped sample: 24,000), off "
+                   "above, with a note.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
@@ -217,7 +220,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
             weight_rotation: str,
             physical: bool, robust: str,
             input_delay: str, control_period: float, encoder_counts: int | None,
-            recipe_check: bool, rcond: float, report_path: str | None,
+            recipe_check: bool | None, rcond: float, report_path: str | None,
             compare_path: str | None,
             validate_logs: tuple[str, ...], split_gaps: bool, workers: int | None,
             dask_address: str | None, quiet: bool) -> None:

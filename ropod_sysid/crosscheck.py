@@ -29,11 +29,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ropod_sysid.errors import InputError
 from ropod_sysid.recipe import QUARTIC_MIN_SAMPLES, Span
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from ropod_sysid.fit import FitOptions, FitResult
     from ropod_sysid.solve import Solution
+
+# With ``recipe_check="auto"`` (``fit``'s default) the check runs on logs of at most this many
+# samples in all: the shipped sample (24,000) and runs of a few minutes at 1 kHz, whose second
+# fit takes about half a second to a second. Longer logs are left to ``--recipe-check``, which
+# about doubles the fit's time.
+AUTO_MAX_SAMPLES = 150_000
 
 
 def log_step(result: FitResult) -> float:
@@ -82,7 +91,7 @@ def folded(sol: Solution, shift: np.ndarray, reference: str) -> Solution:
     return dataclasses.replace(
         sol, std=std,
         std_basis=f"{sol.std_basis}; and in quadrature the shift of each value to a fit with "
-                  f"{reference} (--recipe-check: the recipe's bias, which the jackknife does "
+                  f"{reference} (the recipe check: the recipe's bias, which the jackknife does "
                   "not see)")
 
 
@@ -104,3 +113,41 @@ def fold_shift(result: FitResult, reference: FitResult) -> FitResult:
     else:
         out.solution = folded(result.solution, shift, text)
     return out
+
+
+def wanted(result: FitResult) -> bool:
+    """Whether ``result``'s options ask for the check on its logs (``"auto"``: at most
+    :data:`AUTO_MAX_SAMPLES` samples)."""
+    mode = result.options.recipe_check
+    return mode is True or (mode == "auto" and result.samples <= AUTO_MAX_SAMPLES)
+
+
+def skipped_note(samples: int) -> str:
+    """The note of a fit whose logs were too long for the automatic check."""
+    return (f"recipe check left out: the logs have {samples:,} samples, more than the "
+            f"{AUTO_MAX_SAMPLES:,} up to which fit runs it by default; σ is the jackknife's "
+            "alone and does not include the recipe's bias (docs/accuracy.md); add "
+            "--recipe-check to include it (about twice the fit's time)")
+
+
+def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
+            say: Callable[[str], None]) -> FitResult:
+    """:func:`ropod_sysid.fit.checked`: the reference fit by ``refit`` folded in
+    (:func:`fold_shift`) when :func:`wanted`. With ``"auto"``, a reference recipe that cannot
+    be fitted (logs too short for its span) leaves σ as it is, with a note saying why."""
+    mode = result.options.recipe_check
+    if not wanted(result):
+        if mode == "auto" and result.logs:
+            result.logs[0].notes.append(skipped_note(result.samples))
+        return result
+    say("reference fit (recipe check)")
+    options = reference_options(result.options, log_step(result))
+    try:
+        reference = refit(options)
+    except InputError as exc:
+        if mode is True:
+            raise
+        result.logs[0].notes.append(f"recipe check left out: its reference fit "
+                                    f"({describe(options)}) failed: {exc}")
+        return result
+    return fold_shift(result, reference)

@@ -88,7 +88,9 @@ class FitOptions:
     robust: Robust = "none"  # down-weight stretches with bumps (huber) or collisions (bisquare)
     control_period: float = 0.0  # the drives hold each torque this long (ZOH) [s]
     encoder_counts: int | None = None  # correct for the encoders' errors in A (counts/rev)
-    recipe_check: bool = False  # fold the shift to a second recipe into σ (crosscheck)
+    # fold the shift to a second recipe into σ (crosscheck); "auto": when the logs have at
+    # most crosscheck.AUTO_MAX_SAMPLES samples (the second fit then costs under a second)
+    recipe_check: bool | Literal["auto"] = "auto"
 
     def __post_init__(self) -> None:
         """Nonsense values are a one-line :class:`InputError` before any work."""
@@ -609,15 +611,13 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
 
 def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
             say: Callable[[str], None]) -> FitResult:
-    """With ``--recipe-check``: ``result`` with σ widened by each value's shift to ``refit``
-    under the reference recipe (:mod:`ropod_sysid.crosscheck`); else ``result`` itself."""
-    if not result.options.recipe_check:
-        return result
+    """With the recipe check (``FitOptions.recipe_check``; "auto": on logs of at most
+    :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples): ``result`` with σ widened by each
+    value's shift to ``refit`` under the reference recipe (:mod:`ropod_sysid.crosscheck`);
+    else ``result`` itself, with a note on the first log where "auto" left it out."""
     from ropod_sysid import crosscheck
 
-    say("reference fit (--recipe-check)")
-    reference = refit(crosscheck.reference_options(result.options, crosscheck.log_step(result)))
-    return crosscheck.fold_shift(result, reference)
+    return crosscheck.checked(result, refit, say)
 
 
 def hold_delay(control_period: float) -> float:

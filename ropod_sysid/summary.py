@@ -47,7 +47,7 @@ def identifiability_verdict(result: FitResult) -> str:
         if result.recipe_shift is not None:
             return (f"full rank; the residual is mostly model or discretisation error, not "
                     f"sensor noise (σ {ratio:.2g}× the white-noise σ), and σ includes each "
-                    f"value's shift to a second recipe (--recipe-check), not a bias both "
+                    f"value's shift to a second recipe (the recipe check), not a bias both "
                     f"share; condition number {sol.condition_number:.3g}, worst relative std "
                     f"{100 * rel[worst]:.1f}% ({sol.names[worst]})")
         return (f"full rank, but the residual is mostly model or discretisation error, not "

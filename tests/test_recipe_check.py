@@ -1,15 +1,19 @@
-"""fit --recipe-check: the shift to a second recipe folded into σ (ropod_sysid.crosscheck)."""
+"""The recipe check (fit's default on logs of up to 150,000 samples, --recipe-check): the shift
+to a second recipe folded into σ (ropod_sysid.crosscheck)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from ropod_sysid import crosscheck
 from ropod_sysid.cli.main import main
 from ropod_sysid.crosscheck import reference_options
+from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files, fit_logs
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.platform import save_platform
@@ -61,7 +65,7 @@ def test_recipe_check_folds_the_shift_into_sigma(off_square, truth, varied_run):
     from ropod_sysid.params import parameter_names
 
     ref = truth.vector(parameter_names(off_square))
-    plain = fit_logs([varied_run], off_square)
+    plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
     checked = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
     other = fit_logs([varied_run], off_square, reference_options(FitOptions(), 0.005))
     shift = plain.solution.values - other.solution.values
@@ -75,7 +79,7 @@ def test_recipe_check_folds_the_shift_into_sigma(off_square, truth, varied_run):
 
     assert inside(plain) < 0.5 and inside(checked) == 1.0
     assert abs(plain.solution.values[0] / ref[0] - 1) > 0.05  # m_b +6.2 %
-    assert "--recipe-check" in checked.solution.std_basis
+    assert "(the recipe check: the recipe's bias" in checked.solution.std_basis
     extras = checked.parameter_file().extras["recipe_check"]
     assert extras["reference"] == "--smoother quartic --span 0.1s --input-delay auto"
     assert extras["shift"]["m_b"] == pytest.approx(shift[0])
@@ -100,6 +104,58 @@ def test_recipe_check_of_files_as_of_logs(tmp_path, off_square, varied_run):
     data = json.loads(out.read_text())
     assert data["recipe_check"]["reference"].startswith("--smoother quartic")
     assert data["parameters"]["m_b"]["std"] == pytest.approx(files.solution.std[0], rel=1e-9)
+    # the default on a log of 12,001 samples: the same check; --no-recipe-check: none
+    default = tmp_path / "default.json"
+    res = CliRunner().invoke(main, ["fit", str(log), "--platform", str(platform), "--out",
+                                    str(default), "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(default.read_text()) == data
+    plain = tmp_path / "plain.json"
+    res = CliRunner().invoke(main, ["fit", str(log), "--platform", str(platform), "--out",
+                                    str(plain), "--no-recipe-check", "--quiet"])
+    assert res.exit_code == 0, res.output
+    unchecked = json.loads(plain.read_text())
+    assert "recipe_check" not in unchecked
+    assert unchecked["parameters"]["m_b"]["std"] < data["parameters"]["m_b"]["std"]
+
+
+def test_automatic_check_leaves_long_logs_with_a_note(monkeypatch, off_square, varied_run):
+    """"auto" (the default) checks logs of up to AUTO_MAX_SAMPLES samples; above, σ stays the
+    jackknife's and the first log's notes say so and how to include the bias."""
+    assert FitOptions().recipe_check == "auto"
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", 10_000)  # the run: 12,001 samples
+    long = fit_logs([varied_run], off_square)
+    plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
+    np.testing.assert_array_equal(long.solution.std, plain.solution.std)
+    assert long.recipe_shift is None
+    assert long.logs[0].notes[-1] == (
+        f"recipe check left out: the logs have {long.samples:,} samples, more than the "
+        "10,000 up to which fit runs it by default; σ is the jackknife's alone and does "
+        "not include the recipe's bias (docs/accuracy.md); add --recipe-check to include it "
+        "(about twice the fit's time)")
+    assert not any("recipe check" in note for note in plain.logs[0].notes)
+    forced = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
+    assert forced.recipe_shift is not None
+
+
+def test_automatic_check_whose_reference_fails_keeps_sigma(off_square, varied_run):
+    """A reference fit that cannot be made (an InputError) leaves an automatic check's σ as it
+    was, with a note naming the reference; asked for with --recipe-check it is the error."""
+    plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
+
+    def refit(options: FitOptions):
+        raise InputError("run.csv: too short for the span")
+
+    fresh = [dataclasses.replace(lf, notes=[]) for lf in plain.logs]
+    auto = crosscheck.checked(dataclasses.replace(plain, options=FitOptions(), logs=fresh),
+                              refit, lambda _: None)
+    np.testing.assert_array_equal(auto.solution.std, plain.solution.std)
+    assert auto.logs[0].notes == [
+        "recipe check left out: its reference fit (--smoother quartic --span 0.1s "
+        "--input-delay auto) failed: run.csv: too short for the span"]
+    with pytest.raises(InputError, match="too short for the span"):
+        crosscheck.checked(dataclasses.replace(plain, options=FitOptions(recipe_check=True)),
+                           refit, lambda _: None)
 
 
 def test_report_of_a_checked_parameter_file(off_square, varied_run):

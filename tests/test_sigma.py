@@ -22,6 +22,7 @@ from tests.swivel_arrays import C, with_arrays
 from tests.test_stream import assert_same_triangles
 
 NOISY = Sensors(encoder_counts=2**14, current_noise=0.03)
+PLAIN = FitOptions(recipe_check=False)  # the jackknife's σ alone (fit --no-recipe-check)
 
 
 def coverage(sol, true: np.ndarray, std: np.ndarray | None = None) -> float:
@@ -98,7 +99,7 @@ def test_verdict_says_when_model_error_dominates(off_square, runs_off_square,
     """Exact logs: the residual is discretisation error (σ ~4× the white-noise σ): never
     "well determined"; sensor noise dominating (σ ~1.05×): no such warning (the verdict is
     then "weakly determined" on these short runs, for m_wh)."""
-    exact = fit_logs([r.log for r in runs_off_square], off_square)
+    exact = fit_logs([r.log for r in runs_off_square], off_square, PLAIN)
     verdict = identifiability_verdict(exact)
     assert verdict.startswith("full rank, but the residual is mostly model or discretisation "
                               "error"), verdict
@@ -114,7 +115,7 @@ def test_verdict_says_when_model_error_dominates(off_square, runs_off_square,
     assert identifiability_verdict(checked).startswith(
         "full rank; the residual is mostly model or discretisation error, not sensor noise (σ "
         ), identifiability_verdict(checked)
-    assert ("σ includes each value's shift to a second recipe (--recipe-check), not a bias "
+    assert ("σ includes each value's shift to a second recipe (the recipe check), not a bias "
             "both share") in identifiability_verdict(checked)
     noisy = fit_logs(runs_off_square_noisy, off_square)
     assert model_error_ratio(noisy) < 1.5 < 3 < model_error_ratio(exact)
@@ -127,7 +128,7 @@ def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square, runs_
     """A "well determined" LOESS fit whose inertial σ fall under 2 % (a long log's) says that σ
     may not cover the LOESS's discretisation bias and names the quartic; not at larger σ, not
     with the quartic, not where the span is under the quartic's 17 samples."""
-    fit = fit_logs(runs_off_square_noisy, off_square)
+    fit = fit_logs(runs_off_square_noisy, off_square, PLAIN)
 
     def scaled(result, k: float):
         sol = dataclasses.replace(result.solution, std=result.solution.std * k,
@@ -157,7 +158,7 @@ def test_verdict_of_small_loess_sigma_names_the_smoothers_bias(off_square, runs_
     checked = dataclasses.replace(small, recipe_shift={n: 0.0 for n in fit.names})
     assert "LOESS" not in identifiability_verdict(checked)  # σ holds the other recipe's shift
     # the symmetric ropod's identifiable combinations (rank deficient) alike
-    square = fit_logs([r.log for r in runs_square], ropod_platform())
+    square = fit_logs([r.log for r in runs_square], ropod_platform(), PLAIN)
     rel = np.abs(square.solution.std / square.solution.values)
     ok = np.isfinite(rel) & (rel > 0)
     deficient = identifiability_verdict(scaled(square, 0.015 / rel[ok][:5].min()))
@@ -168,13 +169,15 @@ def test_physical_fit_has_its_own_std_and_marks_bounds(off_square, runs_off_squa
     """m_b held at 50 kg pushes J_rot,w below 0 in the free fit; the bounded fit holds it at 0
     and its σ are those of the free parameters at that point."""
     logs = [r.log for r in runs_off_square[:2]]
-    fit = fit_logs(logs, off_square, FitOptions(physical=True, fix={"m_b": 50.0}))
+    fit = fit_logs(logs, off_square, FitOptions(physical=True, fix={"m_b": 50.0},
+                                                    recipe_check=False))
     names, ph = fit.names, fit.physical
     j = names.index("Jrot_w")
     assert fit.solution.values[j] < 0 and ph.values[j] == 0.0
     assert [n for n, a in zip(names, ph.at_bound, strict=True) if a] == ["Jrot_w"]
     assert np.isnan(ph.std[j]) and not ph.note
-    held = fit_logs(logs, off_square, FitOptions(fix={"m_b": 50.0, "Jrot_w": 0.0})).solution
+    held = fit_logs(logs, off_square, FitOptions(fix={"m_b": 50.0, "Jrot_w": 0.0},
+                                                        recipe_check=False)).solution
     np.testing.assert_allclose(ph.values, held.values, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(ph.std, held.std, rtol=1e-9)
     assert not np.allclose(ph.std[1:4], fit.solution.std[1:4], rtol=0.05)
@@ -258,7 +261,7 @@ def test_where_the_corrected_cost_is_fragile_the_delay_is_a_fixed_point(monkeypa
 
     monkeypatch.setattr(delay_module, "parabola_vertex", vertex)
     logs = list(runs_off_square_noisy)
-    opts = FitOptions(input_delay="auto", encoder_counts=2**14)
+    opts = FitOptions(input_delay="auto", encoder_counts=2**14, recipe_check=False)
     none = fit_logs(logs, off_square, opts).input_delay
     assert abs(none - seen[-1]) < 2 * delay_module.DELAY_TOL  # g(d) = d at the end
     assert none == pytest.approx(5e-4, abs=5e-4)
@@ -279,13 +282,15 @@ def test_delay_search_on_quantised_logs_corrects_for_the_detected_counts(off_squ
     found = []
     for shift in (0.0, 0.005):
         logs = [shifted_currents(log, shift) if shift else log]
-        auto = fit_logs(logs, off_square, FitOptions(input_delay="auto"))
-        counted = fit_logs(logs, off_square, FitOptions(input_delay="auto", encoder_counts=2**14))
+        auto = fit_logs(logs, off_square, FitOptions(input_delay="auto", recipe_check=False))
+        counted = fit_logs(logs, off_square, FitOptions(input_delay="auto", encoder_counts=2**14,
+                                                        recipe_check=False))
         assert auto.input_delay == pytest.approx(counted.input_delay, abs=1e-4)
         found.append(auto.input_delay)
     assert abs(found[0]) < 1e-3 and found[1] - found[0] == pytest.approx(0.005, abs=5e-4)
     # the last (shifted) one: plain at its delay, and noted
-    fixed = fit_logs(logs, off_square, FitOptions(input_delay=auto.input_delay))
+    fixed = fit_logs(logs, off_square, FitOptions(input_delay=auto.input_delay,
+                                                  recipe_check=False))
     np.testing.assert_allclose(auto.solution.values, fixed.solution.values, rtol=1e-8)
     assert auto.logs[0].triangles.error_gram is None
     notes = auto.logs[0].notes
@@ -320,8 +325,9 @@ def test_input_delay_auto_equals_the_fit_at_its_delay(off_square, runs_off_squar
     """Nodes a sample apart interpolate exactly: the auto fit is the fit at the delay found;
     an optimum at the end of the bracket gets a note."""
     logs = [shifted_currents(r.log, 0.003) for r in runs_off_square[:2]]
-    auto = fit_logs(logs, off_square, FitOptions(input_delay="auto"))
-    fixed = fit_logs(logs, off_square, FitOptions(input_delay=auto.input_delay))
+    auto = fit_logs(logs, off_square, FitOptions(input_delay="auto", recipe_check=False))
+    fixed = fit_logs(logs, off_square, FitOptions(input_delay=auto.input_delay,
+                                                  recipe_check=False))
     np.testing.assert_allclose(auto.solution.values, fixed.solution.values, rtol=1e-8)
     np.testing.assert_allclose(auto.solution.std, fixed.solution.std, rtol=1e-8)
     assert not any("end of the bracket" in n for lf in auto.logs for n in lf.notes)
