@@ -1,4 +1,6 @@
-"""``fit --recipe-check``: fold the recipe's own bias into σ by fitting the logs a second way.
+"""The recipe check: fold the recipe's own bias into σ by fitting the logs a second way
+(``fit``'s default on logs of up to :data:`AUTO_MAX_SAMPLES` samples; ``--recipe-check``,
+``--no-recipe-check``).
 
 σ (:func:`ropod_sysid.solve.jackknife_covariance`) is the spread of the values over the logs'
 stretches: it sees errors that vary from stretch to stretch and none that every stretch shares.
@@ -132,9 +134,12 @@ def skipped_note(samples: int) -> str:
 
 def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
             say: Callable[[str], None]) -> FitResult:
-    """:func:`ropod_sysid.fit.checked`: the reference fit by ``refit`` folded in
-    (:func:`fold_shift`) when :func:`wanted`. With ``"auto"``, a reference recipe that cannot
-    be fitted (logs too short for its span) leaves σ as it is, with a note saying why."""
+    """The fit ``result`` with the recipe check (:attr:`ropod_sysid.fit.FitOptions.recipe_check`)
+    when :func:`wanted`: the reference fit by ``refit`` (``fit_logs`` or ``fit_files`` of the
+    same logs) under :func:`reference_options`, folded in (:func:`fold_shift`); else ``result``
+    itself, with a note on its first log where ``"auto"`` left the check out. With ``"auto"``,
+    a reference recipe that cannot be fitted (an :class:`InputError`, e.g. logs too short for
+    its span) leaves σ as it is, with a note saying why."""
     mode = result.options.recipe_check
     if not wanted(result):
         if mode == "auto" and result.logs:

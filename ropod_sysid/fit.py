@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
+from ropod_sysid.crosscheck import checked
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
@@ -607,17 +608,6 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
         result = _fit(reduce, platform, options)
     return checked(result, lambda ref: fit_files(paths, platform, ref, workers, dask_address,
                                                  chunk, progress, quiet), say)
-
-
-def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
-            say: Callable[[str], None]) -> FitResult:
-    """With the recipe check (``FitOptions.recipe_check``; "auto": on logs of at most
-    :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples): ``result`` with σ widened by each
-    value's shift to ``refit`` under the reference recipe (:mod:`ropod_sysid.crosscheck`);
-    else ``result`` itself, with a note on the first log where "auto" left it out."""
-    from ropod_sysid import crosscheck
-
-    return crosscheck.checked(result, refit, say)
 
 
 def hold_delay(control_period: float) -> float:
