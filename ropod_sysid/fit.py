@@ -118,6 +118,10 @@ class FitOptions:
         if w not in ("auto", "none") and not (isinstance(w, int | float)
                                                and math.isfinite(w) and w > 0):
             raise InputError(f"--weight-rotation {w!r}: use auto, none or a finite number > 0")
+        if not (self.recipe_check is True or self.recipe_check is False
+                or self.recipe_check == "auto"):
+            raise InputError(f"recipe_check {self.recipe_check!r}: use True (--recipe-check), "
+                             "False (--no-recipe-check) or 'auto' (the default)")
 
 
 @dataclass

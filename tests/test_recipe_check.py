@@ -123,6 +123,9 @@ def test_automatic_check_leaves_long_logs_with_a_note(monkeypatch, off_square, v
     """"auto" (the default) checks logs of up to AUTO_MAX_SAMPLES samples; above, σ stays the
     jackknife's and the first log's notes say so and how to include the bias."""
     assert FitOptions().recipe_check == "auto"
+    with pytest.raises(InputError, match=r"^recipe_check 'yes': use True \(--recipe-check\), "
+                       r"False \(--no-recipe-check\) or 'auto' \(the default\)$"):
+        FitOptions(recipe_check="yes")  # type: ignore[arg-type]
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", 10_000)  # the run: 12,001 samples
     long = fit_logs([varied_run], off_square)
     plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
