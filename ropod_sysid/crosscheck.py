@@ -117,6 +117,20 @@ def fold_shift(result: FitResult, reference: FitResult) -> FitResult:
     return out
 
 
+# what a value whose σ is mostly its recipe shift is flagged with (report, printed table)
+RECIPE_LIMITED = ("recipe-limited: its shift to the second recipe exceeds the jackknife's σ, so "
+                  "its σ is mostly the recipe's bias, which more logs of the same kind do not "
+                  "shrink (a higher log rate, slower transients or the drives' --control-period "
+                  "may)")
+
+
+def recipe_limited(std: float, shift: float) -> bool:
+    """Whether σ ``std`` (with the shift folded in, √(σ_j² + Δ²)) is mostly the recipe shift
+    ``shift`` Δ: |Δ| above the jackknife's own σ_j = √(σ² − Δ²)."""
+    return bool(math.isfinite(std) and math.isfinite(shift)
+                and 2.0 * shift * shift > std * std)
+
+
 def wanted(result: FitResult) -> bool:
     """Whether ``result``'s options ask for the check on its logs (``"auto"``: at most
     :data:`AUTO_MAX_SAMPLES` samples)."""

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ropod_sysid.crosscheck import recipe_limited
 from ropod_sysid.fit import FitResult
 from ropod_sysid.io.paramfile import ParameterFile
 from ropod_sysid.params import UNITS_OF, is_inertial, kind_of
@@ -185,6 +186,9 @@ def format_fit(result: FitResult, compare: ParameterFile | None = None,
             notes.append("combination: " + sol.combinations.get(name, ""))
         if implausible(name, shown[j]):
             notes.append("implausible (negative)")
+        shift = (result.recipe_shift or {}).get(name)
+        if shift is not None and recipe_limited(float(sol.std[j]), shift):
+            notes.append(f"recipe-limited (shift {shift:+.3g})")
         std = "" if not np.isfinite(sol.std[j]) else f"{sol.std[j]:.4g}"
         rs = "" if not np.isfinite(rel[j]) else f"{100 * rel[j]:.1f}%"
         unit = UNITS_OF.get(kind_of(name), "")

@@ -172,3 +172,29 @@ def test_report_of_a_checked_parameter_file(off_square, varied_run):
     assert result.shown.std_basis == checked.solution.std_basis
     assert result.recipe_shift == pytest.approx(checked.recipe_shift)
     assert "--recipe-check folds" not in identifiability_verdict(result)
+
+
+def test_recipe_limited_values_are_flagged(off_square, varied_run):
+    """A value whose shift exceeds the jackknife's σ (2Δ² > σ², σ² = σ_j² + Δ²) is flagged
+    recipe-limited in the printed table and the report, which shows each value's shift."""
+    from ropod_sysid.crosscheck import recipe_limited
+    from ropod_sysid.report.html import render_fit_report
+    from ropod_sysid.summary import format_fit
+
+    assert recipe_limited(1.0, 0.71) and not recipe_limited(1.0, 0.70)
+    assert not recipe_limited(float("nan"), 1.0)
+    checked = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
+    sol = checked.solution
+    limited = [n for j, n in enumerate(sol.names)
+               if 2 * checked.recipe_shift[n] ** 2 > sol.std[j] ** 2]
+    assert "m_b" in limited and len(limited) < len(sol.names)  # the bias of the weak combination
+    table = format_fit(checked)
+    flagged = [line.split()[0] for line in table.splitlines() if "recipe-limited (shift " in line]
+    assert flagged == limited
+    assert f"recipe-limited (shift {checked.recipe_shift['m_b']:+.3g})" in table
+    html = render_fit_report(checked, [varied_run])
+    assert ">recipe shift</th>" in html
+    assert html.count('<span class="flag recipe-limited"') == len(limited)
+    plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
+    assert "recipe-limited" not in format_fit(plain)
+    assert ">recipe shift</th>" not in render_fit_report(plain, [varied_run])

@@ -34,6 +34,7 @@ import jinja2
 import numpy as np
 
 from ropod_sysid import __version__
+from ropod_sysid.crosscheck import RECIPE_LIMITED, recipe_limited
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import (
     MIN_ROBUST_STRETCHES,
@@ -407,12 +408,15 @@ def _parameter_rows(result: FitResult, shown: np.ndarray,
         if implausible(name, value):
             flags.append(("implausible", "implausible",
                           "negative mass or inertia: physically implausible"))
+        shift = (result.recipe_shift or {}).get(name)
+        if shift is not None and recipe_limited(std, shift):
+            flags.append(("recipe-limited", "recipe-limited", RECIPE_LIMITED))
         row: dict[str, Any] = {
             "name": name, "unit": UNITS_OF.get(kind, ""), "description": DESCRIPTION.get(kind, ""),
             "value": value, "std": std if math.isfinite(std) else None,
             "rel": float(rel[j]) if math.isfinite(rel[j]) else None,
             "weak": bool(math.isfinite(rel[j]) and rel[j] > WEAK_RELATIVE_STD),
-            "flags": flags,
+            "flags": flags, "shift": shift,
         }
         if compare is not None:
             o = other.get(name)
@@ -541,6 +545,7 @@ def _render(result: FitResult, logs: Sequence[Source] | None, painter: Painter,
         "warnings": warnings,
         "weak_threshold": WEAK_RELATIVE_STD,
         "parameters": rows,
+        "recipe_shift": result.recipe_shift is not None,
         "compare_label": compare_label,
         "only_other": only_other,
         "n_implausible": n_implausible,
