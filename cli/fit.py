@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import math
 import re
+from typing import Literal, cast
 
 import click
 
@@ -20,14 +21,15 @@ from ropod_sysid.cli.common import (
     writes,
 )
 from ropod_sysid.errors import InputError
-from ropod_sysid.fit import FitOptions, FitResult, fit_files
+from ropod_sysid.fit import FitOptions, FitResult, WeightRotation, fit_files
 from ropod_sysid.inspect import motion_shortfall
 from ropod_sysid.io import read_logs
 from ropod_sysid.io.log import Log
-from ropod_sysid.io.paramfile import DEFAULT_NODE, ParameterFile, write_parameter_file
+from ropod_sysid.io.paramfile import DEFAULT_NODE, Format, ParameterFile, write_parameter_file
+from ropod_sysid.params import Friction
 from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
-from ropod_sysid.robust import ROBUST_METHODS
+from ropod_sysid.robust import ROBUST_METHODS, Robust
 from ropod_sysid.solve import RCOND
 from ropod_sysid.stream import validate_sources
 from ropod_sysid.summary import format_fit, format_validation
@@ -57,9 +59,9 @@ def parse_fix(items: tuple[str, ...]) -> dict[str, float]:
     return out
 
 
-def parse_weight(text: str) -> str | float:
-    if text in ("auto", "none"):
-        return text
+def parse_weight(text: str) -> WeightRotation:
+    if text == "auto" or text == "none":
+        return "auto" if text == "auto" else "none"
     try:
         w = float(text)
     except ValueError:
@@ -70,10 +72,10 @@ def parse_weight(text: str) -> str | float:
     return w
 
 
-def parse_delay(text: str, span: Span | None = None) -> str | float:
+def parse_delay(text: str, span: Span | None = None) -> float | Literal["auto"]:
     """auto, or seconds, (when ``span`` is in seconds) at most one span either way."""
     if text == "auto":
-        return text
+        return "auto"
     try:
         d = float(text.removesuffix("s"))
     except ValueError:
@@ -102,12 +104,13 @@ def fit_options(friction: str, span: Span | str | None, fix: tuple[str, ...],
                 encoder_counts: int | None = None, smoother: str = "loess",
                 recipe_check: bool | None = None) -> FitOptions:
     sp = Span.parse(span).with_smoother(smoother)
-    return FitOptions(friction=friction,  # type: ignore[arg-type]
+    # friction and robust: click's Choice of FRICTION_VARIANTS and ROBUST_METHODS
+    return FitOptions(friction=cast(Friction, friction),
                       span=sp, fix=parse_fix(fix),
-                      weight_rotation=parse_weight(weight_rotation),  # type: ignore[arg-type]
-                      physical=physical, input_delay=parse_delay(input_delay, sp),  # type: ignore
+                      weight_rotation=parse_weight(weight_rotation),
+                      physical=physical, input_delay=parse_delay(input_delay, sp),
                       rcond=rcond, row_step=parse_row_step(row_step), split_gaps=split_gaps,
-                      robust=robust, control_period=control_period,  # type: ignore[arg-type]
+                      robust=cast(Robust, robust), control_period=control_period,
                       encoder_counts=encoder_counts,
                       recipe_check="auto" if recipe_check is None else recipe_check)
 
@@ -262,7 +265,7 @@ def command(logs: tuple[str, ...], platform_path: str, out_path: str, fmt: str, 
         result = fit_files(list(logs), platform, options, workers=workers,
                            dask_address=dask_address, quiet=quiet, plots=painter is not None)
         check_enough(result, logs)
-        write_parameter_file(result.parameter_file(), out_path, fmt, platform,  # type: ignore[arg-type]
+        write_parameter_file(result.parameter_file(), out_path, cast(Format, fmt), platform,
                              node_name=node_name)
         validation = None
         if validate_logs and report_path is None:

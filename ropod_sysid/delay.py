@@ -38,8 +38,9 @@ def search_counts_note(systems: Sequence[Triangles]) -> str | None:
     counts = [s.error_counts for s in systems]
     if not any(counts):
         return None
-    if all(counts):
-        shown = sorted(set(counts))  # type: ignore[type-var]
+    known = [c for c in counts if c]
+    if len(known) == len(counts):
+        shown = sorted(set(known))
         n = "/".join(map(str, shown))
         return (f"--input-delay auto: the search corrected its criterion for the quantisation "
                 f"of the {n}-count encoders the angles move by, as --encoder-counts {n} does "
@@ -107,7 +108,8 @@ def delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
         if detecting:  # the fit itself as asked: uncorrected
             at = replace(at, error_gram=None, error_counts=None)
         if plot is not None and plot.b_rows.ndim == 3:
-            w = node_weights(s.delays, delay, s.delay_order)  # type: ignore[arg-type]
+            assert s.delays is not None  # (a 3-D b_rows: the search's nodes)
+            w = node_weights(s.delays, delay, s.delay_order)
             plot = replace(plot, b_rows=plot.b_rows @ w)
         out.append((source, at, notes, plot))
     if note:
@@ -164,8 +166,9 @@ def corrected_delay(systems: Sequence[Triangles], nodes: np.ndarray, names: Sequ
         costs = np.zeros(len(nodes))
         for s, w in zip(systems, weights, strict=True):
             scale = np.array([1.0, 1.0, w * w])
+            assert s.delays is not None  # the search's systems hold b_ID at its nodes
             for j, x in enumerate(nodes):
-                z = np.append(sol.values, -node_weights(s.delays, float(x), s.delay_order))  # type: ignore[arg-type]
+                z = np.append(sol.values, -node_weights(s.delays, float(x), s.delay_order))
                 costs[j] += float(scale @ ((s.r @ z) ** 2).sum(axis=1))
         return parabola_vertex(nodes, costs)
 

@@ -261,9 +261,14 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
         t = t_new
     n = len(t)
     k = span.samples(dt, n)
-    nodes = input_delay.nodes(dt) if isinstance(input_delay, DelayBracket) else None
-    if nodes is None:
-        check_input_delay(float(input_delay), k * dt)  # type: ignore[arg-type]
+    nodes: np.ndarray | None = None
+    shift: float | np.ndarray  # the torques' delay, or the bracket's node delays
+    if isinstance(input_delay, DelayBracket):
+        shift = nodes = input_delay.nodes(dt)
+        order = input_delay.order(dt)
+    else:
+        shift, order = float(input_delay), 1
+        check_input_delay(shift, k * dt)
     grid = RowGrid.for_span(k, row_step, span.degree)
     trim = grid.trim(k)  # the shifted end windows of both filter stages
     check_length(log.source, n, k, dt, trim)
@@ -273,11 +278,9 @@ def preprocess(log: Log, platform: Platform, span: Span | None = None,
     angles_s = smooth(angles, k, span.degree)
     pose_s = None if pose is None else smooth(tracker_pose(pose), k, span.degree)
     q, qd, qdd, rates, _ = derivatives(model, angles_s, pose_s, dt, degree=span.degree)
-    tau = delayed(t, platform.torque_constants() * current,
-                  nodes if nodes is not None else input_delay)  # type: ignore[arg-type]
+    tau = delayed(t, platform.torque_constants() * current, shift)
     return Preprocessed(t, q, qd, qdd, angles_s, rates, tau, log.source, k, dt, notes, trim,
-                        grid, nodes, input_delay.order(dt) if nodes is not None else 1,  # type: ignore[union-attr]
-                        span.degree, jitter)
+                        grid, nodes, order, span.degree, jitter)
 
 
 class Motion(Protocol):

@@ -20,7 +20,7 @@ BISQUARE_C = 4.685  # bisquare: a stretch beyond BISQUARE_C × the median's coun
 ROBUST_ITERATIONS = 50
 DOWN_WEIGHTED = 0.5  # a stretch weighted below this is listed as down-weighted
 Robust = Literal["none", "huber", "bisquare"]
-ROBUST_METHODS: tuple[str, ...] = ("none", "huber", "bisquare")
+ROBUST_METHODS: tuple[Robust, ...] = ("none", "huber", "bisquare")
 
 
 def stretch_rms(values: np.ndarray, stretches: np.ndarray) -> np.ndarray:

@@ -162,7 +162,8 @@ class _Blocks:
         self.span = span
         self.reach = span.reach  # samples each side the two differences reach
         self.bracket = input_delay if isinstance(input_delay, DelayBracket) else None
-        self.delay: float | np.ndarray = 0.0 if self.bracket else float(input_delay)  # type: ignore[arg-type]
+        self.delay: float | np.ndarray = (0.0 if isinstance(input_delay, DelayBracket)
+                                          else float(input_delay))
         self.friction = friction
         self.chunk = max(int(chunk), 1)
         self.row_step = row_step

@@ -66,6 +66,7 @@ from ropod_sysid.progress import Progress
 from ropod_sysid.regressor import Span
 from ropod_sysid.report.correlation import correlation_table
 from ropod_sysid.report.painter import Drawn, Painter
+from ropod_sysid.robust import Robust
 from ropod_sysid.solve import STRETCH_S, combined_rms
 from ropod_sysid.stream import Source, StreamResult, check_source, stream_log, stream_pieces
 from ropod_sysid.summary import (
@@ -134,8 +135,8 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
         fixed.update({str(k): float(v) for k, v in extra_fixed.items()
                       if str(k) in names and isinstance(v, int | float)})
     robust_extra = pfile.extras.get("robust")
-    robust = str(robust_extra.get("method")) if isinstance(robust_extra, dict) \
-        and robust_extra.get("method") in ROBUST_METHODS else "none"
+    method = robust_extra.get("method") if isinstance(robust_extra, dict) else None
+    robust: Robust = next((m for m in ROBUST_METHODS if m == method), "none")
     counts = pfile.extras.get("encoder_counts")
     counts = int(counts) if isinstance(counts, int) and not isinstance(counts, bool) else None
     period = pfile.extras.get("control_period_s")
@@ -143,7 +144,7 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
         period, bool) and math.isfinite(period) and 0 <= period <= 0.05 else 0.0
     # (the file's input_delay_s already holds half the control period; for the account only)
     options = FitOptions(friction=friction, span=span, fix=fixed, input_delay=delay,
-                         row_step=row_step, robust=robust,  # type: ignore[arg-type]
+                         row_step=row_step, robust=robust,
                          encoder_counts=counts, control_period=period)
 
     check_distinct([log for log in logs if not isinstance(log, Log)])
@@ -170,7 +171,7 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     sol, weights = fit_systems(systems, names, options)
 
     m = np.array([values.get(k, 0.0) for k in names])
-    std = np.array([np.nan if stds.get(k) is None else float(stds[k]) for k in names])  # type: ignore[arg-type]
+    std = np.array([np.nan if (v := stds.get(k)) is None else v for k in names])
     combination = sol.combination.copy()
     combinations = {}
     for j, k in enumerate(names):
