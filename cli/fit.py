@@ -20,6 +20,7 @@ from ropod_sysid.cli.common import (
     split_gaps_option,
     writes,
 )
+from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, FitResult, WeightRotation, fit_files
 from ropod_sysid.inspect import motion_shortfall
@@ -197,8 +198,8 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                    "see (ten varied 60 s runs at 200 Hz and 1 kHz: 100 % of the values within "
                    "2σ on every run, against 34–100 % without; with --encoder-counts one run "
                    "66 %; docs/accuracy.md). About twice the time of the fit. Default: on for "
-                   "logs of up to 150,000 samples in all (the shipped sample: 24,000), off "
-                   "above, with a note.")
+                   f"logs of up to {AUTO_MAX_SAMPLES:,} samples in all (the shipped sample: "
+                   "24,000), off above, with a note.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
