@@ -197,9 +197,10 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                    "includes the recipe's own bias, which the jackknife over stretches cannot "
                    "see (ten varied 60 s runs at 200 Hz and 1 kHz: 100 % of the values within "
                    "2σ on every run, against 34–100 % without; with --encoder-counts one run "
-                   "66 %; docs/accuracy.md). About twice the time of the fit. Default: on for "
-                   f"logs of up to {AUTO_MAX_SAMPLES:,} samples in all (the shipped sample: "
-                   "24,000), off above, with a note.")
+                   "66 %; docs/accuracy.md). The second recipe is formed in the same pass over "
+                   "the logs: 1.4–1.8× the fit's time. Default: on for logs of up to "
+                   f"{AUTO_MAX_SAMPLES:,} samples in all (the shipped sample: 24,000; 16 minutes "
+                   "at 1 kHz), off above, with a note.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,

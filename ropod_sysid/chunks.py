@@ -101,6 +101,41 @@ def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
     return dense_or_fused(read(), read, model)
 
 
+# the longest a CSV field of a float64 takes, with its comma: "-2.2250738585072014e-308,"
+CSV_FIELD_BYTES = 25
+
+
+def fewest_samples(source: Source) -> int:
+    """A lower bound of a log's samples that costs no reading: for a CSV log (also
+    ``.csv.gz``, by the size gzip records) its bytes over the longest row its header's fields
+    can make (:data:`CSV_FIELD_BYTES` each); 0 for other sources, or when unsure. (The recipe
+    check, :mod:`ropod_sysid.crosscheck`, leaves a log out of the fit's pass when it is surely
+    too long for ``fit``'s default check.)"""
+    if isinstance(source, Log):
+        return source.n_samples
+    path = Path(source)
+    name = path.name.lower()
+    try:
+        if name.endswith(".csv"):
+            size = path.stat().st_size
+            with path.open("rb") as f:
+                header = f.readline(1 << 16)
+        elif name.endswith(".csv.gz"):
+            import gzip
+
+            with path.open("rb") as f:  # the last member's size mod 2³²: a bound of one member
+                f.seek(-4, 2)
+                size = int.from_bytes(f.read(4), "little")
+            with gzip.open(path, "rb") as g:
+                header = g.readline(1 << 16)
+        else:
+            return 0
+    except (OSError, EOFError, ValueError):
+        return 0
+    fields = header.count(b",") + 1
+    return max(0, (size - len(header)) // (CSV_FIELD_BYTES * fields + 1))
+
+
 def source_name(source: Source) -> str:
     return source.source if isinstance(source, Log) else str(source)
 

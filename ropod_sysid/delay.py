@@ -76,9 +76,10 @@ def delay_search(reduce: Reduce, names: Sequence[str], options: FitOptions,
     that delay stays as asked, uncorrected; a note says what the search did
     (:func:`search_counts_note`). When only some logs' angles move by whole counts the
     criterion stays uncorrected (a note says so)."""
-    top = min(options.max_delay, options.span.value) if options.span.seconds \
-        else options.max_delay
-    wide = reduce(DelayBracket(top), True)
+    bracket = options.reduce_delay()
+    assert isinstance(bracket, DelayBracket)  # (input_delay "auto")
+    top = bracket.top
+    wide = reduce(bracket, True)
     systems = [tri for _, tri, _, _ in wide]
     detecting = options.encoder_counts is None  # then a gram is of counts detected in a log
     note = search_counts_note(systems) if detecting else None

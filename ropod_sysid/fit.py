@@ -68,6 +68,7 @@ from ropod_sysid.solve import (
 
 if TYPE_CHECKING:
     from ropod_sysid.plotdata import LogPlot
+    from ropod_sysid.stream import Reference
 
 WeightRotation = Literal["auto", "none"] | float
 
@@ -90,7 +91,7 @@ class FitOptions:
     control_period: float = 0.0  # the drives hold each torque this long (ZOH) [s]
     encoder_counts: int | None = None  # correct for the encoders' errors in A (counts/rev)
     # fold the shift to a second recipe into σ (crosscheck); "auto": when the logs have at
-    # most crosscheck.AUTO_MAX_SAMPLES samples (the second fit then costs under a second)
+    # most crosscheck.AUTO_MAX_SAMPLES samples (its reference formed in the fit's own pass)
     recipe_check: bool | Literal["auto"] = "auto"
 
     def __post_init__(self) -> None:
@@ -122,6 +123,19 @@ class FitOptions:
                 or self.recipe_check == "auto"):
             raise InputError(f"recipe_check {self.recipe_check!r}: use True (--recipe-check), "
                              "False (--no-recipe-check) or 'auto' (the default)")
+
+    def reduce_delay(self) -> float | DelayBracket:
+        """What a pass over the logs forms b_ID at: the bracket ±top of ``--input-delay
+        auto`` (top = ``max_delay``, at most one span given in seconds;
+        :func:`ropod_sysid.delay.delay_search`), else the delay, with half the drives'
+        ``control_period`` added (:func:`hold_delay`)."""
+        if self.input_delay == "auto":
+            span = self.span
+            return DelayBracket(min(self.max_delay, span.value) if span.seconds
+                                else self.max_delay)
+        # a torque held by the drives over a control period acts, on average, half a period
+        # after the instant it is logged at (zero-order hold)
+        return float(self.input_delay) + hold_delay(self.control_period)
 
 
 @dataclass
@@ -582,36 +596,69 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     (:func:`ropod_sysid.io.check_distinct`); with ``options.split_gaps`` a log with gaps in
     time is fitted as its pieces (:func:`ropod_sysid.stream.stream_pieces`). With ``plots``
     the last pass also gathers what the report draws of each log (:attr:`LogFit.plot`;
-    bounded size), so that a report needs no second reading of the logs.
+    bounded size), so that a report needs no second reading of the logs. The recipe check's
+    reference (:mod:`ropod_sysid.crosscheck`) is formed in the same pass over the logs
+    (:func:`ropod_sysid.stream.piece_triangles_checked`), and the logs are read again only
+    where it could not be.
     """
-    from ropod_sysid.distributed import pool
-    from ropod_sysid.stream import DEFAULT_CHUNK, check_source, piece_triangles
+    from ropod_sysid.stream import check_source
 
     options = options or FitOptions()
     if not paths:
         raise InputError("no logs given; pass one or more log files")
-    paths = [str(p) for p in paths]
-    check_distinct(paths)
-    for p in paths:
+    names = [str(p) for p in paths]
+    check_distinct(names)
+    for p in names:
         check_source(p, platform)
     say = progress or (lambda _msg: None)
+    formed: list[Reference | None] = []
+    result = _fit_paths(names, platform, options, workers, dask_address, chunk, say, quiet,
+                        plots, formed)
+    return checked(result, lambda ref: _fit_paths(names, platform, ref, workers, dask_address,
+                                                  chunk, say, quiet, False, formed), say)
+
+
+def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
+               workers: int | None, dask_address: str | None, chunk: int | None,
+               say: Callable[[str], None], quiet: bool, plots: bool,
+               formed: list[Reference | None]) -> FitResult:
+    """:func:`fit_files` of checked ``paths`` without the recipe check. ``formed``: empty, the
+    fit's own pass also forms the check's reference of each log (unless
+    ``options.recipe_check`` is False) and puts it there; filled, the reference fit takes its
+    logs from it where they match its recipe, instead of reading them again."""
+    from ropod_sysid.chunks import fewest_samples
+    from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
+    from ropod_sysid.distributed import pool
+    from ropod_sysid.stream import DEFAULT_CHUNK, piece_triangles, piece_triangles_checked
+
+    size = chunk or DEFAULT_CHUNK
+    # the reference beside the fit's pass, unless the check is off or surely left out
+    beside = options.recipe_check is True or (
+        options.recipe_check == "auto"
+        and sum(fewest_samples(p) for p in paths) <= AUTO_MAX_SAMPLES)
     with pool(workers, dask_address, quiet=quiet) as run:
         def reduce(delay: float | DelayBracket, plot: bool,
                    ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
+            if formed and all(r is not None and r.span == options.span and r.delay == delay
+                              for r in formed):
+                return [piece for r in formed if r is not None for piece in r.pieces]
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
                 + (f" (input delays ±{1000 * delay.top:.0f} ms)"
                    if isinstance(delay, DelayBracket) else
                    f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
+            if beside and not formed:
+                both = run(piece_triangles_checked, paths, platform=platform, check=options,
+                           input_delay=delay, chunk=size, plot=plot and plots)
+                formed.extend(ref for _, ref in both)
+                return [piece for pieces, _ in both for piece in pieces]
             parts = run(piece_triangles, paths, platform=platform, span=options.span,
                         input_delay=delay, friction=options.friction,
-                        chunk=chunk or DEFAULT_CHUNK, row_step=options.row_step,
+                        chunk=size, row_step=options.row_step,
                         split_gaps=options.split_gaps, plot=plot and plots,
                         encoder_counts=options.encoder_counts)
             return [piece for pieces in parts for piece in pieces]
 
-        result = _fit(reduce, platform, options)
-    return checked(result, lambda ref: fit_files(paths, platform, ref, workers, dask_address,
-                                                 chunk, progress, quiet), say)
+        return _fit(reduce, platform, options)
 
 
 def hold_delay(control_period: float) -> float:
@@ -647,9 +694,9 @@ def _fit_blas(reduce: Reduce, platform: Platform, options: FitOptions) -> FitRes
 
         reduced, delay, detected = delay_search(reduce, names, options)
     else:
-        # a torque held by the drives over a control period acts, on average, half a period
-        # after the instant it is logged at (zero-order hold)
-        delay = float(options.input_delay) + hold_delay(options.control_period)
+        at = options.reduce_delay()
+        assert not isinstance(at, DelayBracket)  # (not "auto")
+        delay = at
         reduced = reduce(delay, True)
     for source, tri, _, _ in reduced:
         if tri.torque_free():

@@ -53,9 +53,11 @@ from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ropod_sysid import crosscheck
 from ropod_sysid.chunks import (
     DEFAULT_CHUNK,
     Source,
@@ -105,6 +107,9 @@ from ropod_sysid.validate import (
     observer_samples,
     observer_step,
 )
+
+if TYPE_CHECKING:
+    from ropod_sysid.fit import FitOptions
 
 ROWS_IN_FLIGHT = 2  # blocks whose rows the worker thread may still be reducing
 
@@ -362,26 +367,132 @@ class _Blocks:
 # entry points
 
 
+@dataclass(frozen=True)
+class Reference:
+    """The recipe check's reference pieces of a log, formed in the fit's own pass
+    (:func:`piece_triangles_checked`): the reference recipe's span and what its b_ID was formed
+    at (a delay, or the search's bracket), as :func:`ropod_sysid.crosscheck.reference_options`
+    gave them for the log's sample time."""
+
+    span: Span
+    delay: float | DelayBracket
+    pieces: list[tuple[str, Triangles, list[str], LogPlot | None]]
+
+
+class _Tee:
+    """The grid's sink of a pass that also forms the recipe check's reference triangles
+    (:mod:`ropod_sysid.crosscheck`) from the same samples, so that the check needs no second
+    reading of the log. The reference's blocks are made once the sample time is known (its
+    span and delay bracket depend on it); an :class:`InputError` of the reference (a log too
+    short for its span) or a log longer than ``ceiling`` samples drops it, and the check then
+    reads the log again (or is left out)."""
+
+    def __init__(self, blocks: _Blocks, make: Callable[[float], _Blocks],
+                 ceiling: int | None) -> None:
+        self.blocks = blocks
+        self.make = make
+        self.ceiling = ceiling
+        self.ref: _Blocks | None = None
+        self.dropped = False
+
+    def start(self, dt: float, jitter: float = 0.0) -> None:
+        self.blocks.start(dt, jitter)
+        try:
+            self.ref = self.make(dt)
+            self.ref.start(dt, jitter)
+        except InputError:
+            self.drop()
+
+    def push(self, samples: _Samples) -> None:
+        self.blocks.push(samples)
+        if self.ref is None:
+            return
+        if self.ceiling is not None and self.ref.avail + len(samples) > self.ceiling:
+            self.drop()
+            return
+        try:
+            self.ref.push(samples)
+        except InputError:
+            self.drop()
+
+    def finish(self) -> tuple[Triangles, float | DelayBracket] | None:
+        """The reference's triangles and what its b_ID was formed at; None if dropped."""
+        if self.ref is None:
+            return None
+        ref = self.ref
+        try:
+            tri = ref.finish()[0]
+        except InputError:
+            self.drop()
+            return None
+        return tri, (ref.bracket if ref.bracket is not None else float(ref.delay))
+
+    def drop(self) -> None:
+        self.close()
+        self.ref = None
+        self.dropped = True
+
+    def close(self) -> None:
+        if self.ref is not None:
+            self.ref.close()
+
+
 class _Run:
-    """The pass over one log, or over one piece of it (--split-gaps)."""
+    """The pass over one log, or over one piece of it (--split-gaps); with ``check`` (the
+    fit's options) also the recipe check's reference (:class:`_Tee`)."""
 
     def __init__(self, name: str, piece: int, first: int, resample: bool,
-                 blocks: _Blocks) -> None:
+                 blocks: _Blocks, check: FitOptions | None = None) -> None:
         self.name = name
         self.piece = piece
         self.first = first  # the piece's first sample in the log
         self.blocks = blocks
-        self.grid = _Grid(name, resample, blocks)
+        self.tee: _Tee | None = None
+        self.detected: int | None = None  # the counts the first chunk's angles move by
+        if check is not None:
+            ceiling = crosscheck.AUTO_MAX_SAMPLES if check.recipe_check == "auto" else None
+            self.tee = _Tee(blocks, lambda dt: self._reference_blocks(check, dt), ceiling)
+        self.grid = _Grid(name, resample, self.tee or blocks)
         self.notes: list[str] = []
         self.raw = 0  # samples read
         self.t0 = self.t1 = 0.0
+
+    def _reference_blocks(self, check: FitOptions, dt: float) -> _Blocks:
+        """The reference recipe's blocks (:func:`ropod_sysid.crosscheck.reference_options`
+        at this log's sample time ``dt``), as the primary's otherwise."""
+        options = crosscheck.reference_options(check, dt)
+        own = self.blocks
+        ref = _Blocks(own.platform, options.span, options.reduce_delay(), own.friction,
+                      own.chunk, own.source, None, False, own.row_step,
+                      threaded=own.worker is not None, encoder_counts=own.encoder_counts)
+        if ref.bracket is not None and ref.encoder_counts is None:
+            ref.search_counts = self.detected
+        return ref
+
+    def reference(self) -> tuple[Span, float | DelayBracket, StreamResult] | None:
+        """The reference recipe's span, delay and result, after :meth:`finish`; None without
+        one (no check asked, or dropped)."""
+        if self.tee is None or self.tee.ref is None:
+            return None
+        ref = self.tee.ref
+        got = self.tee.finish()
+        if got is None:
+            return None
+        tri, delay = got
+        return ref.span, delay, StreamResult(self.blocks.source, tri, [], ref.avail, ref.dt,
+                                             ref.k)
+
+    def close(self) -> None:
+        self.blocks.close()
+        if self.tee is not None:
+            self.tee.close()
 
     def push(self, log: Log) -> None:
         if not self.raw:
             from ropod_sysid.quantisation import counts_note, log_encoder_counts
 
             self.t0 = float(log.t[0])
-            detected = log_encoder_counts(log)
+            detected = self.detected = log_encoder_counts(log)
             quartic = log.n_samples > 1 and self.blocks.span.quartic_would_fit(
                 float(np.median(np.diff(log.t))))
             note = counts_note(self.name, detected, self.blocks.encoder_counts,
@@ -412,12 +523,16 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
           friction: Friction, chunk: int, params: DynamicParameters | None, keep_series: bool,
           resample: bool, prefetch: bool, row_step: int | None, split_gaps: bool,
           done: list[StreamResult | None], dropped: list[str], plot: bool = False,
-          encoder_counts: int | None = None) -> None:
+          encoder_counts: int | None = None, check: FitOptions | None = None,
+          done_ref: list[tuple[Span, float | DelayBracket, StreamResult] | None] | None = None,
+          ) -> None:
     """One pass over a log; with ``split_gaps`` over each piece between its gaps as a log of
     its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
     pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
     ``resample`` puts the first of the others on the uniform grid from its start; ``plot``
-    gathers what the report draws of each piece."""
+    gathers what the report draws of each piece. With ``check`` (the fit's options) each
+    piece's recipe-check reference goes to ``done_ref`` beside it (:class:`_Tee`; None where
+    it was dropped)."""
     name = source_name(source)
     restart = len(done)  # the piece the pass restarts at
     chunks = iter_chunks(source, platform, chunk, "allow" if split_gaps else "error")
@@ -431,21 +546,29 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
     def finish(run: _Run, last: bool) -> None:
         if split_gaps and not (last and run.piece == 0):  # a log without gaps keeps its name
             run.name = run.grid.source = run.blocks.source = piece_name(name, run.piece)
+        ref = None
         try:
             check_piece_samples(run.name, run.raw)
             res = run.finish()
+            ref = run.reference()
         except TooShort as exc:
             if not split_gaps:
                 raise
             done.append(None)
+            if done_ref is not None:
+                done_ref.append(None)
             dropped.append(left_out(exc))
             return
         finally:
-            run.blocks.close()
+            run.close()
         if run.name != name:
             res.triangles.label = run.name
             res.notes.insert(0, piece_note(run.name, name, run.first, run.raw, run.t0, run.t1))
+            if ref is not None:
+                ref[2].triangles.label = run.name
         done.append(res)
+        if done_ref is not None:
+            done_ref.append(ref)
 
     try:
         for log in chunks:
@@ -458,7 +581,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
                                      keep_series, row_step, threaded=prefetch, plot=plot,
                                      encoder_counts=encoder_counts)
                     run = _Run(name, log.piece, first, resample and log.piece == restart,
-                               blocks)
+                               blocks, check)
                 run.push(log)
             first += log.n_samples
         if run is not None:
@@ -466,7 +589,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
             run = None
     finally:
         if run is not None:
-            run.blocks.close()
+            run.close()
 
 
 def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
@@ -474,18 +597,23 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
                   chunk: int = DEFAULT_CHUNK, params: DynamicParameters | None = None,
                   keep_series: bool = False, prefetch: bool = True,
                   row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
-                  encoder_counts: int | None = None) -> list[StreamResult]:
+                  encoder_counts: int | None = None, check: FitOptions | None = None,
+                  references: list[tuple[Span, float | DelayBracket, StreamResult] | None]
+                  | None = None) -> list[StreamResult]:
     """:func:`stream_log`; with ``split_gaps`` a log with gaps in time
     (:mod:`ropod_sysid.io.timebase`) gives one result per piece between them, each a log of
     its own (its grid, its smoother ends), named ``run.csv[2]`` …; a piece too short for the
     smoother span is left out with a note (on the first piece kept); none left is an error.
     Without ``split_gaps`` a gap is an error. ``plot``: see :func:`stream_log`.
-    ``encoder_counts``: also the encoders' error gram of A (``fit --encoder-counts``)."""
+    ``encoder_counts``: also the encoders' error gram of A (``fit --encoder-counts``).
+    ``check`` (the fit's options, with ``references``): also the recipe check's reference of
+    each piece kept, into ``references`` (:func:`piece_triangles_checked`)."""
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
     RowGrid.check_step(row_step)  # a bad row step fails before the file is opened
     done: list[StreamResult | None] = []
+    done_ref: list[tuple[Span, float | DelayBracket, StreamResult] | None] = []
     dropped: list[str] = []
     resample = False
     with single_thread_blas():
@@ -493,7 +621,7 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
             try:
                 _pass(source, platform, span, input_delay, friction, chunk, params,
                       keep_series, resample, prefetch, row_step, split_gaps, done, dropped,
-                      plot, encoder_counts)
+                      plot, encoder_counts, check, done_ref if check is not None else None)
                 break
             except _OffGrid:
                 # a step off the grid after the head: the log (piece) is jittered after all;
@@ -503,6 +631,8 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
     if not kept:
         raise no_piece_left(source_name(source), dropped)
     kept[0].notes.extend(dropped)
+    if references is not None:
+        references.extend(ref for r, ref in zip(done, done_ref, strict=True) if r is not None)
     return kept
 
 
@@ -547,6 +677,34 @@ def piece_triangles(source: Source, platform: Platform, span: Span | None = None
             for r in stream_pieces(source, platform, span, input_delay, friction, chunk,
                                    row_step=row_step, split_gaps=split_gaps, plot=plot,
                                    encoder_counts=encoder_counts)]
+
+
+def piece_triangles_checked(source: Source, platform: Platform, check: FitOptions,
+                            input_delay: float | DelayBracket = 0.0,
+                            chunk: int = DEFAULT_CHUNK, plot: bool = False,
+                            ) -> tuple[list[tuple[str, Triangles, list[str], LogPlot | None]],
+                                       Reference | None]:
+    """:func:`piece_triangles` under the fit's options ``check`` (their span, friction, row
+    step, pieces and encoder counts; b_ID at ``input_delay``), and from the same samples the
+    recipe check's reference (:mod:`ropod_sysid.crosscheck`): the pieces the reference fit's
+    own pass would give, so that the check reads the log once. The reference is None where it
+    could not be formed here — a piece too short for its span, more than
+    :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples with ``recipe_check="auto"``, or
+    pieces whose sample times give different reference spans — and the check then reads the
+    log again (or is left out)."""
+    refs: list[tuple[Span, float | DelayBracket, StreamResult] | None] = []
+    res = stream_pieces(source, platform, check.span, input_delay, check.friction, chunk,
+                        row_step=check.row_step, split_gaps=check.split_gaps, plot=plot,
+                        encoder_counts=check.encoder_counts, check=check, references=refs)
+    pieces = [(r.source, r.triangles, r.notes, r.plot) for r in res]
+    got = [ref for ref in refs if ref is not None]
+    if not got or len(got) != len(refs):
+        return pieces, None
+    span, delay, _ = got[0]
+    if any(g[0] != span or g[1] != delay for g in got):
+        return pieces, None
+    return pieces, Reference(span, delay, [(r.source, r.triangles, r.notes, r.plot)
+                                           for _, _, r in got])
 
 
 def validate_source(source: Source, platform: Platform, params: DynamicParameters,

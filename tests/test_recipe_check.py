@@ -1,4 +1,4 @@
-"""The recipe check (fit's default on logs of up to 150,000 samples, --recipe-check): the shift
+"""The recipe check (fit's default on logs of up to 1,000,000 samples, --recipe-check): the shift
 to a second recipe folded into σ (ropod_sysid.crosscheck)."""
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ def test_automatic_check_leaves_long_logs_with_a_note(monkeypatch, off_square, v
         f"recipe check left out: the logs have {long.samples:,} samples, more than the "
         "10,000 up to which fit runs it by default; σ is the jackknife's alone and does "
         "not include the recipe's bias (docs/accuracy.md); add --recipe-check to include it "
-        "(about twice the fit's time)")
+        "(1.4-1.8 times the fit's time)")
     assert not any("recipe check" in note for note in plain.logs[0].notes)
     forced = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
     assert forced.recipe_shift is not None
@@ -198,3 +198,85 @@ def test_recipe_limited_values_are_flagged(off_square, varied_run):
     plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
     assert "recipe-limited" not in format_fit(plain)
     assert ">recipe shift</th>" not in render_fit_report(plain, [varied_run])
+
+
+def _counting(monkeypatch, module, name: str) -> list[int]:
+    """Count the calls of ``module.name`` (patched in place)."""
+    calls: list[int] = []
+    real = getattr(module, name)
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, counted)
+    return calls
+
+
+def test_reference_formed_in_the_fits_own_pass(tmp_path, monkeypatch, off_square, varied_run):
+    """fit_files forms the reference beside its own triangles, reading each log once, and
+    gives the same values, σ and shifts as a reference fit that reads the logs again."""
+    from ropod_sysid import stream
+
+    log = tmp_path / "run.csv"
+    write_csv_log(varied_run, log)
+    reads = _counting(monkeypatch, stream, "iter_chunks")
+    once = fit_files([log], off_square, FitOptions(recipe_check=True))
+    assert len(reads) == 1 and once.recipe_shift is not None
+    real = stream.piece_triangles_checked
+    monkeypatch.setattr(stream, "piece_triangles_checked",
+                        lambda *a, **k: (real(*a, **k)[0], None))  # no reference: read again
+    twice = fit_files([log], off_square, FitOptions(recipe_check=True))
+    assert len(reads) == 3
+    np.testing.assert_array_equal(once.solution.values, twice.solution.values)
+    np.testing.assert_allclose(once.solution.std, twice.solution.std, rtol=1e-12, atol=0)
+    assert once.recipe_shift == pytest.approx(twice.recipe_shift, rel=1e-12, abs=1e-15)
+    assert once.recipe_reference == twice.recipe_reference
+
+
+def test_reference_of_pieces_between_gaps(tmp_path, monkeypatch, off_square, varied_run):
+    """With --split-gaps each piece gets its reference in the same pass, as read again."""
+    from ropod_sysid import stream
+
+    t = varied_run.t.copy()
+    t[6000:] += 1.0  # a gap of a second at 30 s
+    gapped = dataclasses.replace(varied_run, t=t)
+    log = tmp_path / "gapped.csv"
+    write_csv_log(gapped, log)
+    options = FitOptions(recipe_check=True, split_gaps=True)
+    reads = _counting(monkeypatch, stream, "iter_chunks")
+    once = fit_files([log], off_square, options)
+    assert len(reads) == 1 and [lf.source for lf in once.logs] == [f"{log}[1]", f"{log}[2]"]
+    real = stream.piece_triangles_checked
+    monkeypatch.setattr(stream, "piece_triangles_checked",
+                        lambda *a, **k: (real(*a, **k)[0], None))
+    twice = fit_files([log], off_square, options)
+    np.testing.assert_allclose(once.solution.std, twice.solution.std, rtol=1e-12, atol=0)
+
+
+def test_reference_left_out_of_the_pass_of_long_logs(tmp_path, monkeypatch, off_square,
+                                                     varied_run):
+    """A log surely longer than the automatic check's limit (its bytes over the longest rows)
+    is read without the reference; one whose length is not known beforehand has it dropped at
+    the limit: either way one reading, σ the jackknife's and the note."""
+    from ropod_sysid import stream
+    from ropod_sysid.chunks import fewest_samples
+
+    log = tmp_path / "run.csv"
+    write_csv_log(varied_run, log)
+    gz = tmp_path / "run.csv.gz"
+    write_csv_log(varied_run, gz)
+    assert 0 < fewest_samples(log) == fewest_samples(gz) <= varied_run.n_samples
+    assert fewest_samples(varied_run) == varied_run.n_samples
+    plain = fit_files([log], off_square, FitOptions(recipe_check=False))
+    reads = _counting(monkeypatch, stream, "iter_chunks")
+    beside = _counting(monkeypatch, stream, "piece_triangles_checked")
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", fewest_samples(log) - 1)
+    surely = fit_files([log], off_square)
+    assert (len(reads), len(beside)) == (1, 0)
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", fewest_samples(log))
+    dropped = fit_files([log], off_square)
+    assert (len(reads), len(beside)) == (2, 1)
+    for fit in (surely, dropped):
+        np.testing.assert_array_equal(fit.solution.std, plain.solution.std)
+        assert fit.logs[0].notes[-1].startswith("recipe check left out: the logs have ")
