@@ -54,8 +54,11 @@ from ropod_sysid.summary import identifiability_verdict  # noqa: E402
 COUNTS = 2**14
 CURRENT_NOISE = 0.03
 QUARTIC = Span.parse(None).with_smoother("quartic")
-# the jackknife's σ alone (--no-recipe-check): what the copies do to it is what is measured
+# fit's default (the recipe check, on up to 1,000,000 samples: here every fit), then the
+# jackknife's σ alone (--no-recipe-check): what the copies do to it is what is measured
 OPTIONS = {
+    "(default: the recipe check)": FitOptions(),
+    "--encoder-counts 16384 (the recipe check)": FitOptions(encoder_counts=COUNTS),
     "--no-recipe-check": FitOptions(recipe_check=False),
     "--encoder-counts 16384": FitOptions(encoder_counts=COUNTS, recipe_check=False),
     "--encoder-counts 16384 --input-delay auto": FitOptions(encoder_counts=COUNTS,

@@ -23,11 +23,11 @@ transients, the drives' hold and, at 100 and 200 Hz, the speed loops' ripple tha
 point-sampled currents alias. On 60 s runs σ is already below those biases, so exact logs keep
 31–100 % of their values within 2σ, and the joint fits of ten runs 45–86 %; with sensor noise
 single runs keep 48–100 % and the joint fits 48–97 %. The recipe check (``fit``'s default on
-logs of up to 150,000 samples: each run here alone, the ten jointly at 100 and 200 Hz;
-``--recipe-check``) adds each value's shift to a second recipe to σ: at 200 Hz and 1 kHz
-every run alone then keeps 100 % (62–66 % for one 1 kHz run with ``--encoder-counts``) and
-the joint fits 93–100 %; at 100 Hz 86–100 % with interval-mean currents, 62–100 % with
-point-sampled ones, whose aliasing both recipes share.
+logs of up to 1,000,000 samples: every fit here; ``--recipe-check``) adds each value's shift
+to a second recipe to σ: at 200 Hz and 1 kHz every run alone then keeps 100 % (62–66 % for
+one 1 kHz run with ``--encoder-counts``) and the joint fits 93–100 %; at 100 Hz 86–100 %
+with interval-mean currents, 62–100 % with point-sampled ones, whose aliasing both recipes
+share.
 """
 
 from __future__ import annotations

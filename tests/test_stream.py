@@ -130,6 +130,38 @@ def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, mo
     assert_same_triangles(triangles(PlatformModel(off_square), pre), res.triangles)
 
 
+def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypatch):
+    """The recipe check's reference formed beside the fit's blocks (stream._Tee) survives the
+    restart in resampling mode and equals a pass of its own recipe; past the automatic
+    check's limit it is dropped, the fit's own triangles unchanged."""
+    from ropod_sysid import crosscheck
+
+    monkeypatch.setattr(timebase, "GRID_STEPS", 300)
+    monkeypatch.setattr(grid, "GRID_STEPS", 300)
+    run = runs_off_square[2]
+    jit = jittered(off_square, run)
+    t = run.log.t.copy()
+    t[800:] = jit.t[800:]
+    log = with_arrays(jit, t=t, delta=np.concatenate([D(run.log)[:800], D(jit)[800:]]),
+                      phi=np.concatenate([P(run.log)[:800], P(jit)[800:]]))
+    refs: list = []
+    res = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(recipe_check=True),
+                               references=refs)
+    (span, delay, ref), = refs
+    ref_options = crosscheck.reference_options(FitOptions(), res[0].dt)
+    assert (span, delay) == (ref_options.span, ref_options.reduce_delay())
+    alone = stream.stream_log(log, off_square, span=span, input_delay=delay, chunk=200)
+    assert_same_triangles(alone.triangles, ref.triangles)
+    assert_same_triangles(stream.stream_log(log, off_square, chunk=200).triangles,
+                          res[0].triangles)
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) - 1)
+    refs.clear()
+    over = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(),
+                                references=refs)
+    assert refs == [None]
+    assert_same_triangles(res[0].triangles, over[0].triangles)
+
+
 def test_wrapped_angles_tracker_pose_and_input_delay(off_square, runs_off_square):
     """Pivot angles wrapped to (−π, π], a tracker pose with wrapped heading, an input delay:
     unwrapping, the pose path and the delayed torques continue across chunks."""
