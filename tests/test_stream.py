@@ -104,17 +104,22 @@ def test_jittered_log_same_grid(off_square, runs_off_square):
     assert_same_triangles(triangles(model, pre), res.triangles)
 
 
+def jittered_after_the_head(platform, run, monkeypatch):
+    """``run``'s log on its grid for 800 samples, jittered after them, with a head of 300
+    samples (so that the pass finds the jitter only after its head)."""
+    monkeypatch.setattr(timebase, "GRID_STEPS", 300)  # (the grid step, grid_step)
+    monkeypatch.setattr(grid, "GRID_STEPS", 300)  # (the grid of the pass, ropod_sysid.grid)
+    jit = jittered(platform, run)
+    t = run.log.t.copy()
+    t[800:] = jit.t[800:]
+    return with_arrays(jit, t=t, delta=np.concatenate([D(run.log)[:800], D(jit)[800:]]),
+                       phi=np.concatenate([P(run.log)[:800], P(jit)[800:]]))
+
+
 def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, monkeypatch):
     """Steps off the grid only after the head: the pass restarts in resampling mode and still
     equals the in-memory path."""
-    monkeypatch.setattr(timebase, "GRID_STEPS", 300)  # (the grid step, grid_step)
-    monkeypatch.setattr(grid, "GRID_STEPS", 300)  # (the grid of the pass, ropod_sysid.grid)
-    run = runs_off_square[2]
-    jit = jittered(off_square, run)
-    t = run.log.t.copy()
-    t[800:] = jit.t[800:]
-    log = with_arrays(jit, t=t, delta=np.concatenate([D(run.log)[:800], D(jit)[800:]]),
-                      phi=np.concatenate([P(run.log)[:800], P(jit)[800:]]))
+    log = jittered_after_the_head(off_square, runs_off_square[2], monkeypatch)
     calls = []
     real = stream._pass
 
@@ -136,14 +141,7 @@ def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypa
     check's limit it is dropped, the fit's own triangles unchanged."""
     from ropod_sysid import crosscheck
 
-    monkeypatch.setattr(timebase, "GRID_STEPS", 300)
-    monkeypatch.setattr(grid, "GRID_STEPS", 300)
-    run = runs_off_square[2]
-    jit = jittered(off_square, run)
-    t = run.log.t.copy()
-    t[800:] = jit.t[800:]
-    log = with_arrays(jit, t=t, delta=np.concatenate([D(run.log)[:800], D(jit)[800:]]),
-                      phi=np.concatenate([P(run.log)[:800], P(jit)[800:]]))
+    log = jittered_after_the_head(off_square, runs_off_square[2], monkeypatch)
     refs: list = []
     res = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(recipe_check=True),
                                references=refs)
