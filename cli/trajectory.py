@@ -182,6 +182,22 @@ def _sensors(current_noise: float | None, encoder_counts: int | None, exact: boo
                        None if exact else (encoder_counts or 2**14), log_rate)
 
 
+def _recipe_by_default(traj: Any, platform: Platform, params: Any, friction: str,
+                       log_rate: float, sensors: bool) -> bool:
+    """``trajectory check``'s default for ``--recipe-check``: with a sensor model (the σ a fit
+    reports), where ``fit`` would check the four variants' logs
+    (:data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES`) and their simulation is compiled."""
+    from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
+    from ropod_sysid.model.units import check_variant
+    from ropod_sysid.trajectory.precheck import true_parameters
+    from ropod_sysid.trajectory.recipe_shift import simulation_compiled
+
+    if not sensors or 4 * traj.duration * log_rate > AUTO_MAX_SAMPLES:
+        return False
+    return simulation_compiled(platform, true_parameters(platform, params),
+                               check_variant(friction))
+
+
 def _params(path: str | None, platform: Platform) -> Any:
     if path is None:
         return None
@@ -352,6 +368,13 @@ def optimize_command(v_max: float, a_max: float, w_max: float, alpha_max: float,
               help="True parameter values for relative stds; m_b and Jzz_b alone: the rest "
                    "each unit type's typical values [default: thesis fixed masses, smart-wheel "
                    "platforms only].")
+@click.option("--recipe-check/--no-recipe-check", default=None,
+              help="Also predict the shift that fit's recipe check folds into σ (its default "
+                   "on logs of up to 1,000,000 samples): the four variants simulated without "
+                   "sensor noise at --log-rate and fitted with the check, about 1-2 s (the "
+                   "first run after installing compiles the simulator). Default: on with a "
+                   "sensor model (--current-noise, --encoder-counts, --exact-encoders) where "
+                   "fit would check the run's logs and the simulator is compiled.")
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None,
               help="Plot of the path and the setpoints (.png or .svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
@@ -365,7 +388,8 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
                   curvature_radius_min: float | None, floor: tuple[float, ...], noise: float,
                   current_noise: float | None, encoder_counts: int | None,
                   exact_encoders: bool, log_rate: float, friction: str,
-                  params_path: str | None, plot_path: str | None, as_json: bool) -> None:
+                  params_path: str | None, recipe_check: bool | None, plot_path: str | None,
+                  as_json: bool) -> None:
     """Check a setpoint CSV before a run: limits broken and where, pivot rates and wheel flips
     (units with a pivot), steering rates (steered units), wheel rates (every driven wheel), the
     least curvature radius while moving (with a limit: platforms with legs), the time near
@@ -386,8 +410,10 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
     params = _params(params_path, platform)
     fl = _floor(floor)
     sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=False)
+    recipe = recipe_check if recipe_check is not None else _recipe_by_default(
+        traj, platform, params, friction, log_rate, sensors is not None)
     report = check(traj, platform, limits, fl, noise, params, friction, log_rate,
-                   sensors=sensors)
+                   sensors=sensors, recipe=recipe)
     if plot_path is not None:
         plot(traj, plot_path, fl, limits, platform)
     if as_json:

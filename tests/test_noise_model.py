@@ -141,14 +141,20 @@ def test_check_and_optimize_take_the_sensor_model_on_the_command_line(tmp_path, 
     assert ("predicted standard deviation of the fit (its white-noise σ) for 0.03 A current "
             "noise, 4096-count encoders, 200 Hz logs") in res.output
     assert "rel. bias" in res.output
+    assert "the recipe check (fit's default on logs of up to 1,000,000 samples)" in res.output
     res = runner.invoke(main, ["trajectory", "check", str(out / "original.csv"), "--platform",
                                str(path), "--exact-encoders", "--encoder-counts", "4096"])
     assert res.exit_code == 2
     assert res.output.strip() == ("error: --exact-encoders and --encoder-counts: give one of "
                                   "them")
     res = runner.invoke(main, ["trajectory", "check", str(out / "original.csv"), "--platform",
+                               str(path), "--encoder-counts", "4096", "--no-recipe-check"])
+    assert res.exit_code == 0, res.output
+    assert "rel. bias" in res.output and "recipe check" not in res.output
+    res = runner.invoke(main, ["trajectory", "check", str(out / "original.csv"), "--platform",
                                str(path)])
     assert "white noise σ_b = 1 N" in res.output  # no sensor model: as before
+    assert "recipe check" not in res.output  # (a σ of white noise on b_ID: no shift added)
 
 
 def test_fit_corrects_the_encoders_bias_on_the_shipped_sample():
@@ -467,3 +473,41 @@ def test_the_corrected_triangle_solves_the_corrected_equations_when_they_are_ind
     np.testing.assert_allclose(sol.values, want, rtol=1e-9)
     np.testing.assert_allclose(r[:4, :4].T @ r[:4, :4], gram[:4, :4], rtol=1e-9, atol=1e-9)
     assert r[4, 4] == 0.0
+
+
+def test_check_predicts_the_recipe_shift_of_the_sample_fit():
+    """trajectory check's recipe prediction (the four variants simulated without noise and
+    fitted with the recipe check) gives the shift the README's fit of the shipped sample (2¹⁴
+    counts, 30 mA, --encoder-counts) folds into σ: m_b, J_zz,b and m_wh within 25 %; the σ a
+    checked fit reports is √(σ² + Δ²), and the JSON carries it."""
+    import glob
+    import json
+    from pathlib import Path
+
+    from ropod_sysid.fit import FitOptions, fit_files
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.noise import SensorNoise
+    from ropod_sysid.platform import load_platform
+    from ropod_sysid.trajectory import check, read_trajectory_csv
+
+    sample = Path(__file__).resolve().parents[1] / "datasets" / "ropod"
+    platform = load_platform(sample / "platform.yaml")
+    truth = json.loads((sample / "truth.json").read_text())
+    traj = read_trajectory_csv(sample / "trajectory" / "original.csv.gz",
+                               PlatformModel(platform).planned_columns)
+    rep = check(traj, platform, params=truth, sensors=SensorNoise(0.03, 2**14, 100.0),
+                recipe=True)
+    assert rep.recipe is not None and rep.recipe.names == rep.names
+    assert rep.recipe.reference == "--smoother quartic --span 0.17s --input-delay auto"
+    fit = fit_files(sorted(glob.glob(str(sample / "*.csv.gz"))), platform,
+                    FitOptions(encoder_counts=2**14))
+    assert fit.recipe_shift is not None
+    predicted = dict(zip(rep.names, rep.recipe.shift, strict=True))
+    for name in ("m_b", "Jzz_b", "m_wh"):
+        assert predicted[name] == pytest.approx(fit.recipe_shift[name], rel=0.25), name
+    np.testing.assert_allclose(rep.checked_std, np.hypot(rep.std, rep.recipe.shift))
+    entry = rep.to_dict()["recipe_check"]["parameters"]["m_b"]  # type: ignore[index]
+    assert entry["shift"] == pytest.approx(predicted["m_b"])
+    assert entry["std"] == pytest.approx(float(rep.checked_std[0]))
+    assert abs(entry["error"]) < 0.005 * truth["m_b"]  # the recipe's own bias: 0.2 %
+    assert "σ checked" in rep.text()

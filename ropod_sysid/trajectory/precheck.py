@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, cast, overload
 
 import numpy as np
 
+from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
 from ropod_sysid.errors import InputError
 from ropod_sysid.noise import SensorNoise, predicted_fit_std, predicted_solution
 from ropod_sysid.params import Friction, Parameters
@@ -42,6 +43,7 @@ from ropod_sysid.trajectory.identifiability import (
 )
 from ropod_sysid.trajectory.limits import DEFAULT_FLOOR, Floor, Limits, _check_floor
 from ropod_sysid.trajectory.prediction import Prediction, _variant_prediction
+from ropod_sysid.trajectory.recipe_shift import RecipeShift, predicted_recipe_shift
 from ropod_sysid.trajectory.run_variants import VARIANTS, variants
 from ropod_sysid.trajectory.setpoints import Trajectory
 
@@ -261,6 +263,15 @@ class CheckReport:
     singular: SingularReport | None = None
     combinations: dict[str, str] = field(default_factory=dict)  # as the fit will name them
     curvature: CurvatureReport | None = None
+    recipe: RecipeShift | None = None  # the recipe check's shift on the run's exact logs
+
+    @property
+    def checked_std(self) -> np.ndarray:
+        """The σ a fit with the recipe check reports: √(σ² + Δ²), Δ the predicted shift
+        (:attr:`recipe`); ``std`` without it."""
+        if self.recipe is None:
+            return self.std
+        return np.sqrt(self.std**2 + self.recipe.shift**2)
 
     @property
     def turning(self) -> list[int]:
@@ -329,6 +340,13 @@ class CheckReport:
                               strict=True))},
             **({"sensors": self.sensors.describe(), "sigma_hat": num(self.sigma_hat)}
                if self.sensors is not None else {}),
+            **({"recipe_check": {
+                "reference": self.recipe.reference,
+                "parameters": {n: {"shift": num(float(self.recipe.shift[j])),
+                                   "error": num(float(self.recipe.error[j])),
+                                   "std": num(float(self.checked_std[j]))}
+                               for j, n in enumerate(self.names)}}}
+               if self.recipe is not None else {}),
         }
 
     def _peak_table(self, title: str, units: list[int], peak: np.ndarray, when: np.ndarray
@@ -445,14 +463,45 @@ class CheckReport:
             out.append("bias: what the encoders' quantisation does to the values through the "
                        "errors of q̈ in A_ID,ext (errors in the variables: a fit shrinks the "
                        "columns they blur); it does not average out over a longer run")
+        if self.recipe is not None:
+            out += ["", *self._recipe_text()]
         return "\n".join(out)
+
+    def _recipe_text(self) -> list[str]:
+        """The recipe check's predicted shift, the σ a checked fit reports and the default
+        recipe's own error on the run's exact logs."""
+        assert self.recipe is not None
+        rec = self.recipe
+        out = [f"the recipe check (fit's default on logs of up to {AUTO_MAX_SAMPLES:,} samples), "
+               f"predicted on the run's exact logs simulated at {self.log_rate:g} Hz: each "
+               f"value's shift to a fit with {rec.reference}, the σ a checked fit reports "
+               "(√(std² + shift²)) and the default recipe's own error on those logs:",
+               f"{'parameter':<12}{'shift':>12}{'rel. shift':>12}{'σ checked':>12}"
+               f"{'rel. σ':>10}{'error':>12}{'rel. error':>12}"]
+        checked = self.checked_std
+        for j, (n, v) in enumerate(zip(self.names, self.true_values, strict=True)):
+            sh, sd, err = float(rec.shift[j]), float(checked[j]), float(rec.error[j])
+
+            def rel(x: float, v: float = float(v)) -> str:
+                return f"{100 * x / abs(v):+.3g} %" if math.isfinite(x) and v else ""
+
+            out.append(f"{n:<12}{sh:>+12.3g}{rel(sh):>12}"
+                       + (f"{sd:>12.3g}{rel(sd).lstrip('+'):>10}" if math.isfinite(sd)
+                          else f"{'n/a':>12}{'':>10}")
+                       + (f"{err:>+12.3g}{rel(err):>12}" if math.isfinite(err) else ""))
+        out.append("shift and error are the recipes' discretisation biases (the smoothers' "
+                   "attenuation of fast transients, the drives' 1 ms hold), which no noise "
+                   "model gives and a longer run does not shrink; on noisy logs the fit's shift "
+                   "also holds the recipes' different noise, and on quantised logs fitted "
+                   "without --encoder-counts the two recipes' different quantisation bias")
+        return out
 
 
 def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
           floor: Sequence[float] = DEFAULT_FLOOR, noise: float = 1.0,
           params: Mapping[str, float] | None = None, friction: str = "per-wheel",
           log_rate: float = 100.0, eval_rate: float = 20.0,
-          sensors: SensorNoise | None = None) -> CheckReport:
+          sensors: SensorNoise | None = None, recipe: bool = False) -> CheckReport:
     """Check a planned run before putting the robot on the floor (thesis Sec. VI-A).
 
     Parameters
@@ -472,6 +521,10 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         deviations are then those the fit will report (its white-noise σ, with σ̂ and the
         rows' correlation predicted from current noise and encoder quantisation), and
         ``noise`` and ``log_rate`` are not used
+    recipe : also predict the recipe check's shift (``fit``'s default on logs of up to
+        :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples) by simulating the four
+        variants without sensor noise at the log rate and fitting them with the check
+        (:func:`ropod_sysid.trajectory.recipe_shift.predicted_recipe_shift`)
 
     Returns
     -------
@@ -552,6 +605,11 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     cond = conditioning(a)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(np.abs(true_values) > 0, std / np.abs(true_values), math.inf)
+    shift = None
+    if recipe:
+        shift = predicted_recipe_shift(traj, platform, truth, friction, log_rate)
+        order = [shift.names.index(n) for n in names]
+        shift = RecipeShift(names, shift.shift[order], shift.error[order], shift.reference)
     findings.sort(key=lambda f: (f.t_start, f.what))
     return CheckReport(traj.duration, traj.n_samples, platform.name, platform.unit_names,
                        limits, floor, peaks, findings, pivot_peak, pivot_peak_time, extent,
@@ -561,7 +619,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
                                           strict=True) if w],
                        sensors, s_hat, bias, steer_peak, steer_peak_time, singular,
                        dict(predicted_solution(a, true_values, names).combinations),
-                       curvature)
+                       curvature, shift)
 
 
 def _unit_findings(platform: Platform, limits: Limits, t: np.ndarray,

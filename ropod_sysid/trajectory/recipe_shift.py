@@ -1,0 +1,75 @@
+"""The recipe check's shift predicted for a planned run: ``trajectory check --recipe-check``.
+
+``fit`` folds into each σ the shift Δ of its value to a second recipe (the other smoother, the
+drives' lag searched; :mod:`ropod_sysid.crosscheck`), by default on logs of up to
+:data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples. Δ is the difference of the two
+recipes' discretisation biases — the smoothers' attenuation of fast transients, the drives'
+hold — which no noise model gives: it depends on the motion and on how the drives track it.
+So it is predicted the way it arises: the run's four variants are simulated without sensor
+noise under the default controllers (:func:`ropod_sysid.simulate.simulate`, 1 ms steps, logged
+at the fit's rate) and fitted with the check (:func:`ropod_sysid.fit.fit_logs`); the fit's
+shift is the prediction, and its error against the simulated truth the recipe's own bias on
+that run (what a fit of the run's logs keeps however long they are).
+
+On noisy logs the fit's Δ also holds the two recipes' different noise (σ grows by a median
+1.06–1.17× on noisy single runs, docs/accuracy.md), which this prediction leaves out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ropod_sysid.params import Friction, Parameters
+    from ropod_sysid.platform import Platform
+    from ropod_sysid.trajectory.setpoints import Trajectory
+
+
+@dataclass
+class RecipeShift:
+    """What the recipe check will find on a run's exact logs (each (p,), in the order of
+    ``names``): ``shift`` Δ, the value's shift to the second recipe (0 where the fit leaves
+    it out: fixed, or determined only in combination by one recipe); ``error``, the default
+    recipe's value minus the truth (a combination's minus the truth's same combination; NaN
+    for the values a combination sets to 0);
+    ``reference``, the second recipe as ``fit`` flags."""
+
+    names: list[str]
+    shift: np.ndarray
+    error: np.ndarray
+    reference: str
+
+
+def simulation_compiled(platform: Platform, truth: Parameters, friction: Friction) -> bool:
+    """Whether the run's simulation takes the compiled loop (every unit type has a kernel and
+    numba is installed); else it takes the numpy path, minutes for a minute of run."""
+    from ropod_sysid.model import PlatformModel
+    from ropod_sysid.simulate import compiled_groups
+
+    return compiled_groups(PlatformModel(platform), truth, friction, "auto") is not None
+
+
+def predicted_recipe_shift(traj: Trajectory, platform: Platform, truth: Parameters,
+                           friction: Friction = "per-wheel", log_rate: float = 100.0,
+                           ) -> RecipeShift:
+    """Simulate the four variants of ``traj`` without sensor noise at ``log_rate`` [Hz] under
+    ``truth`` and fit them with the recipe check (``fit``'s default recipe and ``friction``):
+    the shift it folds into σ and the default recipe's error (:class:`RecipeShift`)."""
+    from ropod_sysid.fit import FitOptions, fit_logs
+    from ropod_sysid.simulate import simulate
+    from ropod_sysid.trajectory.run_variants import variants
+
+    runs = simulate(platform, truth, [v.to_setpoints() for v in variants(traj).values()],
+                    rate=log_rate)
+    result = fit_logs([r.log for r in runs], platform,
+                      FitOptions(friction=friction, recipe_check=True))
+    shown = result.shown
+    names = list(shown.names)
+    shift = np.array([(result.recipe_shift or {}).get(n, 0.0) for n in names])
+    # a combination against the truth's same combination; those set to 0: none
+    error = np.where(np.isfinite(shown.std), shown.values - shown.combination_of(
+        truth.vector(names)), np.nan)
+    return RecipeShift(names, shift, error, result.recipe_reference)
