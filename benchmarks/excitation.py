@@ -16,7 +16,9 @@ predicted σ of the predicted bias, and the same of fits with ``--encoder-counts
 for the encoders' errors in A); then the ratios of the typical run's σ and errors to the
 optimised run's (goal: at least 2×, judged on the corrected fits, whose σ match their errors:
 the plain fits' jackknife σ also carry the encoders' errors in A, which vary from stretch to
-stretch) and the optimiser's time.
+stretch) and the optimiser's time. Last, ``fit``'s default (the recipe check): the σ
+``trajectory check`` predicts for it (√(σ² + Δ²), Δ the shift on the run's exact logs), the
+mean fitted σ and the share of seeds within 2 fitted σ.
 """
 
 
@@ -52,12 +54,12 @@ def quantised(log, counts, rng):
 
 
 def measure(name, traj, platform, truth, sensors, seeds):
-    rep = check(traj, platform, sensors=sensors)
+    rep = check(traj, platform, sensors=sensors, recipe=True)
     inert = [j for j, n in enumerate(rep.names) if is_inertial(n)]
     runs = simulate(platform, truth, [v.to_setpoints() for v in variants(traj).values()],
                     rate=sensors.log_rate)
     sens = Sensors(current_noise=sensors.current_noise)
-    stds, errs, stds_c, errs_c = [], [], [], []
+    stds, errs, stds_c, errs_c, stds_k, errs_k = [], [], [], [], [], []
     for seed in range(seeds):
         rng = np.random.default_rng(1000 + seed)
         logs = [quantised(record(platform, r, r.log.t, sens, rng, f"{name}{k}"),
@@ -71,13 +73,21 @@ def measure(name, traj, platform, truth, sensors, seeds):
                                                   recipe_check=False)).solution
         stds_c.append(sol.std)
         errs_c.append(sol.values - tv)
+        # fit's default, the recipe check (trajectory check predicts its σ: the white-noise
+        # σ and the shift on the run's exact logs)
+        sol = fit_logs(logs, platform).solution
+        stds_k.append(sol.std)
+        errs_k.append(sol.values - tv)
     stds, errs = np.array(stds), np.array(errs)
     stds_c, errs_c = np.array(stds_c), np.array(errs_c)
+    stds_k, errs_k = np.array(stds_k), np.array(errs_k)
+    checked = rep.checked_std
     print(f"\n{name}: {traj.duration:g} s, condition number {rep.condition_number:.4g}, "
           f"peaks " + ", ".join(f"{k} {v:.2f}" for k, v in rep.peaks.items()))
     print(f"{'parameter':<10} {'true':>8} {'pred σ':>9} {'pred bias':>10} {'fit σ':>9} "
           f"{'mean err':>9} {'RMS err':>9} {'in 2σ':>6} | --encoder-counts: {'fit σ':>9} "
-          f"{'mean err':>9} {'RMS err':>9} {'in 2fσ':>6}")
+          f"{'mean err':>9} {'RMS err':>9} {'in 2fσ':>6} | the check: {'pred σ':>9} "
+          f"{'fit σ':>9} {'in 2fσ':>6}")
     for j in inert:
         # within 2 predicted σ of the predicted bias; corrected: within 2 of its fitted σ
         within = np.mean(np.abs(errs[:, j] - rep.bias[j]) < 2 * rep.std[j])
@@ -86,7 +96,9 @@ def measure(name, traj, platform, truth, sensors, seeds):
               f"{rep.bias[j]:>+10.3g} {stds[:, j].mean():>9.3g} {errs[:, j].mean():>+9.3g} "
               f"{np.sqrt(np.mean(errs[:, j] ** 2)):>9.3g} {100 * within:>5.0f}% | "
               f"{'':>17} {stds_c[:, j].mean():>9.3g} {errs_c[:, j].mean():>+9.3g} "
-              f"{np.sqrt(np.mean(errs_c[:, j] ** 2)):>9.3g} {100 * within_c:>5.0f}%")
+              f"{np.sqrt(np.mean(errs_c[:, j] ** 2)):>9.3g} {100 * within_c:>5.0f}% | "
+              f"{'':>11}{checked[j]:>9.3g} {stds_k[:, j].mean():>9.3g} "
+              f"{100 * np.mean(np.abs(errs_k[:, j]) < 2 * stds_k[:, j]):>5.0f}%")
     return rep, inert, stds, errs, stds_c, errs_c
 
 

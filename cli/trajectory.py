@@ -413,7 +413,7 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
     recipe = recipe_check if recipe_check is not None else _recipe_by_default(
         traj, platform, params, friction, log_rate, sensors is not None)
     report = check(traj, platform, limits, fl, noise, params, friction, log_rate,
-                   sensors=sensors, recipe=recipe)
+                   sensors=sensors, recipe=recipe, quiet=False)
     if plot_path is not None:
         plot(traj, plot_path, fl, limits, platform)
     if as_json:

@@ -501,7 +501,8 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
           floor: Sequence[float] = DEFAULT_FLOOR, noise: float = 1.0,
           params: Mapping[str, float] | None = None, friction: str = "per-wheel",
           log_rate: float = 100.0, eval_rate: float = 20.0,
-          sensors: SensorNoise | None = None, recipe: bool = False) -> CheckReport:
+          sensors: SensorNoise | None = None, recipe: bool = False,
+          quiet: bool = True) -> CheckReport:
     """Check a planned run before putting the robot on the floor (thesis Sec. VI-A).
 
     Parameters
@@ -524,7 +525,8 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
     recipe : also predict the recipe check's shift (``fit``'s default on logs of up to
         :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples) by simulating the four
         variants without sensor noise at the log rate and fitting them with the check
-        (:func:`ropod_sysid.trajectory.recipe_shift.predicted_recipe_shift`)
+        (:func:`ropod_sysid.trajectory.recipe_shift.predicted_recipe_shift`; ``quiet=False``:
+        the simulation's progress bar on a terminal)
 
     Returns
     -------
@@ -607,7 +609,7 @@ def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
         rel = np.where(np.abs(true_values) > 0, std / np.abs(true_values), math.inf)
     shift = None
     if recipe:
-        shift = predicted_recipe_shift(traj, platform, truth, friction, log_rate)
+        shift = predicted_recipe_shift(traj, platform, truth, friction, log_rate, quiet)
         order = [shift.names.index(n) for n in names]
         shift = RecipeShift(names, shift.shift[order], shift.error[order], shift.reference)
     findings.sort(key=lambda f: (f.t_start, f.what))

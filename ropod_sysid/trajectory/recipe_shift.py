@@ -54,16 +54,17 @@ def simulation_compiled(platform: Platform, truth: Parameters, friction: Frictio
 
 def predicted_recipe_shift(traj: Trajectory, platform: Platform, truth: Parameters,
                            friction: Friction = "per-wheel", log_rate: float = 100.0,
-                           ) -> RecipeShift:
+                           quiet: bool = True) -> RecipeShift:
     """Simulate the four variants of ``traj`` without sensor noise at ``log_rate`` [Hz] under
     ``truth`` and fit them with the recipe check (``fit``'s default recipe and ``friction``):
-    the shift it folds into σ and the default recipe's error (:class:`RecipeShift`)."""
+    the shift it folds into σ and the default recipe's error (:class:`RecipeShift`).
+    ``quiet=False``: the simulation's progress bar on a terminal."""
     from ropod_sysid.fit import FitOptions, fit_logs
     from ropod_sysid.simulate import simulate
     from ropod_sysid.trajectory.run_variants import variants
 
     runs = simulate(platform, truth, [v.to_setpoints() for v in variants(traj).values()],
-                    rate=log_rate)
+                    rate=log_rate, quiet=quiet)
     result = fit_logs([r.log for r in runs], platform,
                       FitOptions(friction=friction, recipe_check=True))
     shown = result.shown
