@@ -629,7 +629,12 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
     from ropod_sysid.chunks import fewest_samples
     from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
     from ropod_sysid.distributed import pool
-    from ropod_sysid.stream import DEFAULT_CHUNK, piece_triangles, piece_triangles_checked
+    from ropod_sysid.stream import (
+        DEFAULT_CHUNK,
+        ReferenceBudget,
+        piece_triangles,
+        piece_triangles_checked,
+    )
 
     size = chunk or DEFAULT_CHUNK
     # the reference beside the fit's pass, unless the check is off or surely left out
@@ -647,8 +652,11 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
                    if isinstance(delay, DelayBracket) else
                    f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
             if beside and not formed:
+                # serially the logs share one budget (on Dask each log has a copy)
+                budget = ReferenceBudget(AUTO_MAX_SAMPLES if options.recipe_check == "auto"
+                                         else None)
                 both = run(piece_triangles_checked, paths, platform=platform, check=options,
-                           input_delay=delay, chunk=size, plot=plot and plots)
+                           input_delay=delay, chunk=size, plot=plot and plots, budget=budget)
                 formed.extend(ref for _, ref in both)
                 return [piece for pieces, _ in both for piece in pieces]
             parts = run(piece_triangles, paths, platform=platform, span=options.span,

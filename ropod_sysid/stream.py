@@ -379,19 +379,40 @@ class Reference:
     pieces: list[tuple[str, Triangles, list[str], LogPlot | None]]
 
 
+@dataclass
+class ReferenceBudget:
+    """Samples the recipe check's reference may still be formed for, over the logs of one fit
+    (``fit``'s automatic check: :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` in all; None,
+    ``--recipe-check``: no limit). Serially every log draws on the same budget; on Dask workers
+    each log has a copy, so a log alone is bounded."""
+
+    left: int | None
+
+    def take(self, n: int) -> bool:
+        """Draw ``n`` samples; False (and nothing drawn) when fewer are left."""
+        if self.left is None:
+            return True
+        if n > self.left:
+            self.left = -1  # spent: later logs too
+            return False
+        self.left -= n
+        return True
+
+
 class _Tee:
     """The grid's sink of a pass that also forms the recipe check's reference triangles
     (:mod:`ropod_sysid.crosscheck`) from the same samples, so that the check needs no second
     reading of the log. The reference's blocks are made once the sample time is known (its
     span and delay bracket depend on it); an :class:`InputError` of the reference (a log too
-    short for its span) or a log longer than ``ceiling`` samples drops it, and the check then
+    short for its span) or more samples than its ``budget`` holds drops it, and the check then
     reads the log again (or is left out)."""
 
     def __init__(self, blocks: _Blocks, make: Callable[[float], _Blocks],
-                 ceiling: int | None) -> None:
+                 budget: ReferenceBudget) -> None:
         self.blocks = blocks
         self.make = make
-        self.ceiling = ceiling
+        self.budget = budget
+        self.drawn = 0  # samples drawn from the budget
         self.ref: _Blocks | None = None
         self.dropped = False
 
@@ -407,9 +428,10 @@ class _Tee:
         self.blocks.push(samples)
         if self.ref is None:
             return
-        if self.ceiling is not None and self.ref.avail + len(samples) > self.ceiling:
+        if not self.budget.take(len(samples)):
             self.drop()
             return
+        self.drawn += len(samples)
         try:
             self.ref.push(samples)
         except InputError:
@@ -427,6 +449,12 @@ class _Tee:
             return None
         return tri, (ref.bracket if ref.bracket is not None else float(ref.delay))
 
+    def refund(self) -> None:
+        """Give the samples drawn back to the budget (the piece will be passed again)."""
+        if self.budget.left is not None and self.budget.left >= 0:
+            self.budget.left += self.drawn
+        self.drawn = 0
+
     def drop(self) -> None:
         self.close()
         self.ref = None
@@ -439,10 +467,12 @@ class _Tee:
 
 class _Run:
     """The pass over one log, or over one piece of it (--split-gaps); with ``check`` (the
-    fit's options) also the recipe check's reference (:class:`_Tee`)."""
+    fit's options) also the recipe check's reference (:class:`_Tee`), drawing on ``budget``
+    (default: the automatic check's limit for this piece alone)."""
 
     def __init__(self, name: str, piece: int, first: int, resample: bool,
-                 blocks: _Blocks, check: FitOptions | None = None) -> None:
+                 blocks: _Blocks, check: FitOptions | None = None,
+                 budget: ReferenceBudget | None = None) -> None:
         self.name = name
         self.piece = piece
         self.first = first  # the piece's first sample in the log
@@ -450,8 +480,9 @@ class _Run:
         self.tee: _Tee | None = None
         self.detected: int | None = None  # the counts the first chunk's angles move by
         if check is not None:
-            ceiling = crosscheck.AUTO_MAX_SAMPLES if check.recipe_check == "auto" else None
-            self.tee = _Tee(blocks, lambda dt: self._reference_blocks(check, dt), ceiling)
+            self.tee = _Tee(blocks, lambda dt: self._reference_blocks(check, dt),
+                            budget or ReferenceBudget(crosscheck.AUTO_MAX_SAMPLES
+                                                      if check.recipe_check == "auto" else None))
         self.grid = _Grid(name, resample, self.tee or blocks)
         self.notes: list[str] = []
         self.raw = 0  # samples read
@@ -525,7 +556,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
           done: list[StreamResult | None], dropped: list[str], plot: bool = False,
           encoder_counts: int | None = None, check: FitOptions | None = None,
           done_ref: list[tuple[Span, float | DelayBracket, StreamResult] | None] | None = None,
-          ) -> None:
+          budget: ReferenceBudget | None = None) -> None:
     """One pass over a log; with ``split_gaps`` over each piece between its gaps as a log of
     its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
     pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
@@ -581,12 +612,16 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
                                      keep_series, row_step, threaded=prefetch, plot=plot,
                                      encoder_counts=encoder_counts)
                     run = _Run(name, log.piece, first, resample and log.piece == restart,
-                               blocks, check)
+                               blocks, check, budget)
                 run.push(log)
             first += log.n_samples
         if run is not None:
             finish(run, last=True)
             run = None
+    except _OffGrid:
+        if run is not None and run.tee is not None:  # the piece is passed again
+            run.tee.refund()
+        raise
     finally:
         if run is not None:
             run.close()
@@ -599,7 +634,7 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
                   row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
                   encoder_counts: int | None = None, check: FitOptions | None = None,
                   references: list[tuple[Span, float | DelayBracket, StreamResult] | None]
-                  | None = None) -> list[StreamResult]:
+                  | None = None, budget: ReferenceBudget | None = None) -> list[StreamResult]:
     """:func:`stream_log`; with ``split_gaps`` a log with gaps in time
     (:mod:`ropod_sysid.io.timebase`) gives one result per piece between them, each a log of
     its own (its grid, its smoother ends), named ``run.csv[2]`` …; a piece too short for the
@@ -607,7 +642,8 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
     Without ``split_gaps`` a gap is an error. ``plot``: see :func:`stream_log`.
     ``encoder_counts``: also the encoders' error gram of A (``fit --encoder-counts``).
     ``check`` (the fit's options, with ``references``): also the recipe check's reference of
-    each piece kept, into ``references`` (:func:`piece_triangles_checked`)."""
+    each piece kept, into ``references`` (:func:`piece_triangles_checked`), drawing on
+    ``budget`` (one for the whole log by default)."""
     span = span or Span.parse(None)
     if chunk < 1:
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
@@ -616,12 +652,16 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
     done_ref: list[tuple[Span, float | DelayBracket, StreamResult] | None] = []
     dropped: list[str] = []
     resample = False
+    if check is not None and budget is None:  # the pieces of a log share one
+        budget = ReferenceBudget(crosscheck.AUTO_MAX_SAMPLES if check.recipe_check == "auto"
+                                 else None)
     with single_thread_blas():
         while True:
             try:
                 _pass(source, platform, span, input_delay, friction, chunk, params,
                       keep_series, resample, prefetch, row_step, split_gaps, done, dropped,
-                      plot, encoder_counts, check, done_ref if check is not None else None)
+                      plot, encoder_counts, check, done_ref if check is not None else None,
+                      budget)
                 break
             except _OffGrid:
                 # a step off the grid after the head: the log (piece) is jittered after all;
@@ -682,20 +722,23 @@ def piece_triangles(source: Source, platform: Platform, span: Span | None = None
 def piece_triangles_checked(source: Source, platform: Platform, check: FitOptions,
                             input_delay: float | DelayBracket = 0.0,
                             chunk: int = DEFAULT_CHUNK, plot: bool = False,
+                            budget: ReferenceBudget | None = None,
                             ) -> tuple[list[tuple[str, Triangles, list[str], LogPlot | None]],
                                        Reference | None]:
     """:func:`piece_triangles` under the fit's options ``check`` (their span, friction, row
     step, pieces and encoder counts; b_ID at ``input_delay``), and from the same samples the
     recipe check's reference (:mod:`ropod_sysid.crosscheck`): the pieces the reference fit's
     own pass would give, so that the check reads the log once. The reference is None where it
-    could not be formed here — a piece too short for its span, more than
-    :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples with ``recipe_check="auto"``, or
-    pieces whose sample times give different reference spans — and the check then reads the
-    log again (or is left out)."""
+    could not be formed here — a piece too short for its span, more samples than ``budget``
+    holds (default: :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` with
+    ``recipe_check="auto"``; :class:`ReferenceBudget`, which the logs of one fit share when
+    they are reduced serially), or pieces whose sample times give different reference spans —
+    and the check then reads the log again (or is left out)."""
     refs: list[tuple[Span, float | DelayBracket, StreamResult] | None] = []
     res = stream_pieces(source, platform, check.span, input_delay, check.friction, chunk,
                         row_step=check.row_step, split_gaps=check.split_gaps, plot=plot,
-                        encoder_counts=check.encoder_counts, check=check, references=refs)
+                        encoder_counts=check.encoder_counts, check=check, references=refs,
+                        budget=budget)
     pieces = [(r.source, r.triangles, r.notes, r.plot) for r in res]
     got = [ref for ref in refs if ref is not None]
     if not got or len(got) != len(refs):

@@ -280,3 +280,33 @@ def test_reference_left_out_of_the_pass_of_long_logs(tmp_path, monkeypatch, off_
     for fit in (surely, dropped):
         np.testing.assert_array_equal(fit.solution.std, plain.solution.std)
         assert fit.logs[0].notes[-1].startswith("recipe check left out: the logs have ")
+
+
+def test_logs_of_one_fit_share_the_references_budget(tmp_path, monkeypatch, off_square,
+                                                     varied_run):
+    """Serially the logs of one fit draw on one budget of AUTO_MAX_SAMPLES: two logs each
+    under it but together over it form the first's reference, not the second's, and the fit
+    keeps the jackknife's σ with the note; each log read once."""
+    from ropod_sysid import stream
+
+    paths = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    write_csv_log(varied_run, paths[0])
+    write_csv_log(dataclasses.replace(varied_run, currents=1.001 * varied_run.currents),
+                  paths[1])  # (not a copy of the first)
+    real = stream.piece_triangles_checked
+    formed: list[bool] = []
+
+    def spy(*args, **kwargs):
+        out = real(*args, **kwargs)
+        formed.append(out[1] is not None)
+        return out
+
+    monkeypatch.setattr(stream, "piece_triangles_checked", spy)
+    reads = _counting(monkeypatch, stream, "iter_chunks")
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", 3 * varied_run.n_samples // 2)
+    fit = fit_files(paths, off_square)
+    assert formed == [True, False] and len(reads) == 2
+    plain = fit_files(paths, off_square, FitOptions(recipe_check=False))
+    np.testing.assert_array_equal(fit.solution.std, plain.solution.std)
+    note = f"recipe check left out: the logs have {fit.samples:,} samples, more than the "
+    assert fit.logs[0].notes[-1].startswith(note)

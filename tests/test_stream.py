@@ -152,6 +152,12 @@ def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypa
     assert_same_triangles(alone.triangles, ref.triangles)
     assert_same_triangles(stream.stream_log(log, off_square, chunk=200).triangles,
                           res[0].triangles)
+    # the automatic check's budget: the restarted pass gives back what its first try drew
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) + 10)
+    refs.clear()
+    stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(), references=refs)
+    assert refs[0] is not None
+    assert_same_triangles(alone.triangles, refs[0][2].triangles)
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) - 1)
     refs.clear()
     over = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(),
