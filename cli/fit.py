@@ -32,8 +32,8 @@ from ropod_sysid.platform import Platform, load_platform
 from ropod_sysid.regressor import Span, check_input_delay, usable_pieces
 from ropod_sysid.robust import ROBUST_METHODS, Robust
 from ropod_sysid.solve import RCOND
-from ropod_sysid.stream import validate_sources
 from ropod_sysid.summary import format_fit, format_validation
+from ropod_sysid.validate import validate_sources
 
 workers_option = click.option(
     "--workers", type=int, default=None, metavar="N",

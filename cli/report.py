@@ -74,7 +74,7 @@ def _report(platform: Platform, logs: tuple[str, ...], params_path: str, out_pat
             split_gaps: bool, quiet: bool, painter: Painter) -> None:
     """The report command's work, its figures drawn by ``painter``."""
     from ropod_sysid.cli.fit import pieces_of
-    from ropod_sysid.fit import fit_settings
+    from ropod_sysid.fitfile import fit_settings
     from ropod_sysid.io.paramfile import read_parameter_file
     from ropod_sysid.report import read_comparison, result_from_parameter_file, write_fit_report
 

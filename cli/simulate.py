@@ -62,7 +62,7 @@ def check_control(control: str) -> None:
 def control_parameters(path: str, platform: Platform) -> DynamicParameters:
     """The controller's parameters from ``path`` for ``platform``: one-line errors naming the
     file for another platform's file, unknown, missing or non-finite parameters."""
-    from ropod_sysid.fit import parameters_of  # (imports the fit's machinery: only here)
+    from ropod_sysid.fitfile import parameters_of
 
     pfile = read_parameters(path, platform)  # a fit's file, or a flat truth.json
     _, values = parameters_of(pfile, platform, path)

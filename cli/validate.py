@@ -15,14 +15,13 @@ from ropod_sysid.cli.common import (
     split_gaps_option,
 )
 from ropod_sysid.cli.fit import dask_option, workers_option
-from ropod_sysid.fit import fit_settings, parameters_of
+from ropod_sysid.fitfile import fit_settings, parameters_of
 from ropod_sysid.io.paramfile import read_parameters
 from ropod_sysid.params import DynamicParameters
 from ropod_sysid.platform import load_platform
 from ropod_sysid.regressor import Span
-from ropod_sysid.stream import validate_sources
 from ropod_sysid.summary import format_validation
-from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD
+from ropod_sysid.validate import FORCE_THRESHOLD, TORQUE_THRESHOLD, validate_sources
 
 
 @click.command("validate", short_help="Check a fitted model on logs it was not fitted on.")

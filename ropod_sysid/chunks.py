@@ -215,3 +215,29 @@ def single_thread_blas() -> Iterator[None]:
             if _blas_users == 0 and _blas_limits is not None:
                 _blas_limits.restore_original_limits()
                 _blas_limits = None
+
+
+def check_source(source: Source, platform: Platform) -> None:
+    """Cheap checks of a log before a long pass: the file exists, its format is known and, for
+    a contract CSV, the header names the platform's columns (one-line :class:`InputError`)."""
+    if isinstance(source, Log):
+        return
+    path = Path(source)
+    name = path.name.lower()
+    from ropod_sysid.io.rosbag import is_bag
+
+    if not name.endswith((".csv", ".csv.gz", ".mcap")) and not is_bag(path):
+        suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
+        raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a "
+                         "ROS 1 .bag or a rosbag2 directory")
+    if name.endswith(".csv"):
+        try:
+            from ropod_sysid.io import smartwheel
+        except ImportError:  # pragma: no cover
+            smartwheel = None  # type: ignore[assignment]
+        if smartwheel is not None and path.is_file() and _is_smartwheel(smartwheel, path):
+            return
+    if name.endswith((".csv", ".csv.gz")):
+        from ropod_sysid.io.csvlog import check_csv_header
+
+        check_csv_header(path, platform)

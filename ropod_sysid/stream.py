@@ -38,8 +38,9 @@ The chunks come from :mod:`ropod_sysid.chunks` (:func:`iter_chunks`, read ahead 
 and steps 1–2 are :mod:`ropod_sysid.grid`; this module holds step 3 (the block reducer), the
 passes over a log or its pieces and the entry points.
 
-:func:`validate_source` does the same for validation: the disturbance observer's causal
-low-pass keeps its filter state across blocks.
+:func:`ropod_sysid.validate.validate_source` does the same for validation: the disturbance
+observer's causal low-pass keeps its filter state across blocks. The recipe check's reference
+recipe can take the same samples beside the fit's (:mod:`ropod_sysid.reference`).
 
 The chunks' time base is checked as they come (:mod:`ropod_sysid.io.timebase`): a gap in time
 is an error, or with ``split_gaps`` (:func:`stream_pieces`) the end of one piece and the start
@@ -52,7 +53,6 @@ from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -61,7 +61,6 @@ from ropod_sysid import crosscheck
 from ropod_sysid.chunks import (
     DEFAULT_CHUNK,
     Source,
-    _is_smartwheel,
     _prefetch,
     iter_chunks,
     single_thread_blas,
@@ -74,10 +73,11 @@ from ropod_sysid.io.timebase import piece_name, piece_note, split_chunks
 from ropod_sysid.lowpass import butter2_lowpass
 from ropod_sysid.model import PlatformModel
 from ropod_sysid.odometry import OdometryState
-from ropod_sysid.params import DynamicParameters, Friction, friction_of, parameter_names
+from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.recipe import delay_reach
+from ropod_sysid.reference import Reference, ReferenceBudget, ReferenceTee
 from ropod_sysid.regressor import (
     DelayBracket,
     Preprocessed,
@@ -103,7 +103,6 @@ from ropod_sysid.validate import (
     FORCE_THRESHOLD,
     OBSERVER_CUTOFF_HZ,
     TORQUE_THRESHOLD,
-    LogValidation,
     observer_samples,
     observer_step,
 )
@@ -367,107 +366,9 @@ class _Blocks:
 # entry points
 
 
-@dataclass(frozen=True)
-class Reference:
-    """The recipe check's reference pieces of a log, formed in the fit's own pass
-    (:func:`piece_triangles_checked`): the reference recipe's span and what its b_ID was formed
-    at (a delay, or the search's bracket), as :func:`ropod_sysid.crosscheck.reference_options`
-    gave them for the log's sample time."""
-
-    span: Span
-    delay: float | DelayBracket
-    pieces: list[tuple[str, Triangles, list[str], LogPlot | None]]
-
-
-@dataclass
-class ReferenceBudget:
-    """Samples the recipe check's reference may still be formed for, over the logs of one fit
-    (``fit``'s automatic check: :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` in all; None,
-    ``--recipe-check``: no limit). Serially every log draws on the same budget; on Dask workers
-    each log has a copy, so a log alone is bounded."""
-
-    left: int | None
-
-    def take(self, n: int) -> bool:
-        """Draw ``n`` samples; False (and nothing drawn) when fewer are left."""
-        if self.left is None:
-            return True
-        if n > self.left:
-            self.left = -1  # spent: later logs too
-            return False
-        self.left -= n
-        return True
-
-
-class _Tee:
-    """The grid's sink of a pass that also forms the recipe check's reference triangles
-    (:mod:`ropod_sysid.crosscheck`) from the same samples, so that the check needs no second
-    reading of the log. The reference's blocks are made once the sample time is known (its
-    span and delay bracket depend on it); an :class:`InputError` of the reference (a log too
-    short for its span) or more samples than its ``budget`` holds drops it, and the check then
-    reads the log again (or is left out)."""
-
-    def __init__(self, blocks: _Blocks, make: Callable[[float], _Blocks],
-                 budget: ReferenceBudget) -> None:
-        self.blocks = blocks
-        self.make = make
-        self.budget = budget
-        self.drawn = 0  # samples drawn from the budget
-        self.ref: _Blocks | None = None
-        self.dropped = False
-
-    def start(self, dt: float, jitter: float = 0.0) -> None:
-        self.blocks.start(dt, jitter)
-        try:
-            self.ref = self.make(dt)
-            self.ref.start(dt, jitter)
-        except InputError:
-            self.drop()
-
-    def push(self, samples: _Samples) -> None:
-        self.blocks.push(samples)
-        if self.ref is None:
-            return
-        if not self.budget.take(len(samples)):
-            self.drop()
-            return
-        self.drawn += len(samples)
-        try:
-            self.ref.push(samples)
-        except InputError:
-            self.drop()
-
-    def finish(self) -> tuple[Triangles, float | DelayBracket] | None:
-        """The reference's triangles and what its b_ID was formed at; None if dropped."""
-        if self.ref is None:
-            return None
-        ref = self.ref
-        try:
-            tri = ref.finish()[0]
-        except InputError:
-            self.drop()
-            return None
-        return tri, (ref.bracket if ref.bracket is not None else float(ref.delay))
-
-    def refund(self) -> None:
-        """Give the samples drawn back to the budget (the piece will be passed again)."""
-        if self.budget.left is not None and self.budget.left >= 0:
-            self.budget.left += self.drawn
-        self.drawn = 0
-
-    def drop(self) -> None:
-        self.close()
-        self.ref = None
-        self.dropped = True
-
-    def close(self) -> None:
-        if self.ref is not None:
-            self.ref.close()
-
-
 class _Run:
     """The pass over one log, or over one piece of it (--split-gaps); with ``check`` (the
-    fit's options) also the recipe check's reference (:class:`_Tee`), drawing on ``budget``
+    fit's options) also the recipe check's reference (:class:`ReferenceTee`), drawing on ``budget``
     (default: the automatic check's limit for this piece alone)."""
 
     def __init__(self, name: str, piece: int, first: int, resample: bool,
@@ -477,10 +378,10 @@ class _Run:
         self.piece = piece
         self.first = first  # the piece's first sample in the log
         self.blocks = blocks
-        self.tee: _Tee | None = None
+        self.tee: ReferenceTee | None = None
         self.detected: int | None = None  # the counts the first chunk's angles move by
         if check is not None:
-            self.tee = _Tee(blocks, lambda dt: self._reference_blocks(check, dt),
+            self.tee = ReferenceTee(blocks, lambda dt: self._reference_blocks(check, dt),
                             budget or ReferenceBudget(crosscheck.AUTO_MAX_SAMPLES
                                                       if check.recipe_check == "auto" else None))
         self.grid = _Grid(name, resample, self.tee or blocks)
@@ -562,7 +463,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
     pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
     ``resample`` puts the first of the others on the uniform grid from its start; ``plot``
     gathers what the report draws of each piece. With ``check`` (the fit's options) each
-    piece's recipe-check reference goes to ``done_ref`` beside it (:class:`_Tee`; None where
+    piece's recipe-check reference goes to ``done_ref`` beside it (:class:`ReferenceTee`; None where
     it was dropped)."""
     name = source_name(source)
     restart = len(done)  # the piece the pass restarts at
@@ -748,88 +649,3 @@ def piece_triangles_checked(source: Source, platform: Platform, check: FitOption
         return pieces, None
     return pieces, Reference(span, delay, [(r.source, r.triangles, r.notes, r.plot)
                                            for _, _, r in got])
-
-
-def validate_source(source: Source, platform: Platform, params: DynamicParameters,
-                    span: Span | None = None, input_delay: float = 0.0,
-                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
-                    row_step: int | None = None) -> LogValidation:
-    """:func:`ropod_sysid.validate.validate_log` of a log read in chunks. The observer series
-    (``t``, ``f_hat``) are kept only with ``keep_series`` (they grow with the log)."""
-    return validate_pieces(source, platform, params, span, input_delay, chunk, keep_series,
-                           row_step)[0]
-
-
-def validate_pieces(source: Source, platform: Platform, params: DynamicParameters,
-                    span: Span | None = None, input_delay: float = 0.0,
-                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
-                    row_step: int | None = None, split_gaps: bool = False,
-                    ) -> list[LogValidation]:
-    """:func:`validate_source` of a log, or of each of its pieces with ``split_gaps``."""
-    return [_validation(res, platform, params)
-            for res in stream_pieces(source, platform, span, input_delay, friction_of(params),
-                                     chunk, params, keep_series, row_step=row_step,
-                                     split_gaps=split_gaps)]
-
-
-def _validation(res: StreamResult, platform: Platform, params: DynamicParameters,
-                ) -> LogValidation:
-    obs = res.observer
-    assert obs is not None
-    m = params.vector(parameter_names(platform, friction_of(params)))
-    count = max(obs.count, 1)
-    keys = ("F_bx", "F_by", "T_bz")
-    t = np.concatenate(obs.t) if obs.t else np.zeros(0)
-    f_hat = np.concatenate(obs.f_hat) if obs.f_hat else np.zeros((0, 3))
-    return LogValidation(
-        source=res.source, samples=res.triangles.samples, rms=res.triangles.rms(m),
-        observer_rms={k: float(np.sqrt(obs.sum_sq[j] / count)) for j, k in enumerate(keys)},
-        observer_max={k: float(obs.max_abs[j]) for j, k in enumerate(keys)},
-        share_above={"force": obs.above_force / count, "torque": obs.above_torque / count},
-        t=t, f_hat=f_hat)
-
-
-def check_source(source: Source, platform: Platform) -> None:
-    """Cheap checks of a log before a long pass: the file exists, its format is known and, for
-    a contract CSV, the header names the platform's columns (one-line :class:`InputError`)."""
-    if isinstance(source, Log):
-        return
-    path = Path(source)
-    name = path.name.lower()
-    from ropod_sysid.io.rosbag import is_bag
-
-    if not name.endswith((".csv", ".csv.gz", ".mcap")) and not is_bag(path):
-        suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
-        raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a "
-                         "ROS 1 .bag or a rosbag2 directory")
-    if name.endswith(".csv"):
-        try:
-            from ropod_sysid.io import smartwheel
-        except ImportError:  # pragma: no cover
-            smartwheel = None  # type: ignore[assignment]
-        if smartwheel is not None and path.is_file() and _is_smartwheel(smartwheel, path):
-            return
-    if name.endswith((".csv", ".csv.gz")):
-        from ropod_sysid.io.csvlog import check_csv_header
-
-        check_csv_header(path, platform)
-
-
-def validate_sources(sources: list[Source], platform: Platform, params: DynamicParameters,
-                     span: Span | None = None, input_delay: float = 0.0,
-                     chunk: int = DEFAULT_CHUNK, workers: int | None = None,
-                     dask_address: str | None = None, row_step: int | None = None,
-                     quiet: bool = True, split_gaps: bool = False) -> list[LogValidation]:
-    """:func:`validate_source` for each log (each of its pieces with ``split_gaps``), on Dask
-    with ``workers`` or ``dask_address`` (a progress bar over the logs unless ``quiet``)."""
-    from ropod_sysid.distributed import pool
-    from ropod_sysid.io import check_distinct
-
-    check_distinct([s for s in sources if not isinstance(s, Log)])
-    for src in sources:
-        check_source(src, platform)
-    with pool(workers, dask_address, quiet=quiet) as run:
-        parts = run(validate_pieces, sources, platform=platform, params=params, span=span,
-                    input_delay=input_delay, chunk=chunk, row_step=row_step,
-                    split_gaps=split_gaps)
-    return [v for pieces in parts for v in pieces]

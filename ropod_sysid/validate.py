@@ -11,15 +11,20 @@ import contextlib
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ropod_sysid.chunks import DEFAULT_CHUNK, Source, check_source
 from ropod_sysid.io.log import Log
 from ropod_sysid.lowpass import lowpass
 from ropod_sysid.model import PlatformModel
-from ropod_sysid.params import DynamicParameters, friction_of
+from ropod_sysid.params import DynamicParameters, friction_of, parameter_names
 from ropod_sysid.platform import Platform
 from ropod_sysid.regressor import Preprocessed, Span, preprocess, row_inputs, triangles
+
+if TYPE_CHECKING:
+    from ropod_sysid.stream import StreamResult
 
 FORCE_THRESHOLD = 40.0  # N, Sec. VII-C
 TORQUE_THRESHOLD = 10.0  # N m
@@ -285,3 +290,64 @@ def fit_percentage(measured: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     spread = np.linalg.norm(measured - measured.mean(axis=0), axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(spread > 0, 100.0 * (1.0 - err / spread), np.nan)
+
+
+def validate_source(source: Source, platform: Platform, params: DynamicParameters,
+                    span: Span | None = None, input_delay: float = 0.0,
+                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
+                    row_step: int | None = None) -> LogValidation:
+    """:func:`ropod_sysid.validate.validate_log` of a log read in chunks. The observer series
+    (``t``, ``f_hat``) are kept only with ``keep_series`` (they grow with the log)."""
+    return validate_pieces(source, platform, params, span, input_delay, chunk, keep_series,
+                           row_step)[0]
+
+
+def validate_pieces(source: Source, platform: Platform, params: DynamicParameters,
+                    span: Span | None = None, input_delay: float = 0.0,
+                    chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
+                    row_step: int | None = None, split_gaps: bool = False,
+                    ) -> list[LogValidation]:
+    """:func:`validate_source` of a log, or of each of its pieces with ``split_gaps``."""
+    from ropod_sysid.stream import stream_pieces  # (the stream reduces with this module's observer)
+
+    return [_validation(res, platform, params)
+            for res in stream_pieces(source, platform, span, input_delay, friction_of(params),
+                                     chunk, params, keep_series, row_step=row_step,
+                                     split_gaps=split_gaps)]
+
+
+def _validation(res: StreamResult, platform: Platform, params: DynamicParameters,
+                ) -> LogValidation:
+    obs = res.observer
+    assert obs is not None
+    m = params.vector(parameter_names(platform, friction_of(params)))
+    count = max(obs.count, 1)
+    keys = ("F_bx", "F_by", "T_bz")
+    t = np.concatenate(obs.t) if obs.t else np.zeros(0)
+    f_hat = np.concatenate(obs.f_hat) if obs.f_hat else np.zeros((0, 3))
+    return LogValidation(
+        source=res.source, samples=res.triangles.samples, rms=res.triangles.rms(m),
+        observer_rms={k: float(np.sqrt(obs.sum_sq[j] / count)) for j, k in enumerate(keys)},
+        observer_max={k: float(obs.max_abs[j]) for j, k in enumerate(keys)},
+        share_above={"force": obs.above_force / count, "torque": obs.above_torque / count},
+        t=t, f_hat=f_hat)
+
+
+def validate_sources(sources: list[Source], platform: Platform, params: DynamicParameters,
+                     span: Span | None = None, input_delay: float = 0.0,
+                     chunk: int = DEFAULT_CHUNK, workers: int | None = None,
+                     dask_address: str | None = None, row_step: int | None = None,
+                     quiet: bool = True, split_gaps: bool = False) -> list[LogValidation]:
+    """:func:`validate_source` for each log (each of its pieces with ``split_gaps``), on Dask
+    with ``workers`` or ``dask_address`` (a progress bar over the logs unless ``quiet``)."""
+    from ropod_sysid.distributed import pool
+    from ropod_sysid.io import check_distinct
+
+    check_distinct([s for s in sources if not isinstance(s, Log)])
+    for src in sources:
+        check_source(src, platform)
+    with pool(workers, dask_address, quiet=quiet) as run:
+        parts = run(validate_pieces, sources, platform=platform, params=params, span=span,
+                    input_delay=input_delay, chunk=chunk, row_step=row_step,
+                    split_gaps=split_gaps)
+    return [v for pieces in parts for v in pieces]

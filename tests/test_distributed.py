@@ -16,7 +16,7 @@ from ropod_sysid.errors import InputError
 from ropod_sysid.fit import fit_files
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.platform import save_platform
-from ropod_sysid.stream import validate_sources
+from ropod_sysid.validate import validate_sources
 
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("distributed") is None,
                                 reason="the dask extra is not installed")

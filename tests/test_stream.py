@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ropod_sysid import grid, stream
+from ropod_sysid import grid, stream, validate
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, fit_files, fit_logs
 from ropod_sysid.io import timebase
@@ -136,8 +136,8 @@ def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, mo
 
 
 def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypatch):
-    """The recipe check's reference formed beside the fit's blocks (stream._Tee) survives the
-    restart in resampling mode and equals a pass of its own recipe; past the automatic
+    """The recipe check's reference formed beside the fit's blocks (ReferenceTee) survives
+    the restart in resampling mode and equals a pass of its own recipe; past the automatic
     check's limit it is dropped, the fit's own triangles unchanged."""
     from ropod_sysid import crosscheck
 
@@ -196,7 +196,7 @@ def test_gzip_csv_and_other_span(tmp_path, off_square, runs_off_square):
 def test_validate_source_equals_validate_log(off_square, truth, runs_off_square):
     log = jittered(off_square, runs_off_square[0], seed=5)
     ref = validate_log(log, off_square, truth)
-    got = stream.validate_source(log, off_square, truth, chunk=97, keep_series=True)
+    got = validate.validate_source(log, off_square, truth, chunk=97, keep_series=True)
     assert got.samples == ref.samples
     for key in ("x", "y", "theta", "translation", "rotation"):
         assert got.rms[key] == pytest.approx(ref.rms[key], rel=1e-9)
@@ -207,7 +207,7 @@ def test_validate_source_equals_validate_log(off_square, truth, runs_off_square)
     np.testing.assert_array_equal(got.t, ref.t)
     np.testing.assert_allclose(got.f_hat, ref.f_hat, rtol=0,
                                atol=1e-9 * np.abs(ref.f_hat).max())
-    lean = stream.validate_source(log, off_square, truth, chunk=1000)
+    lean = validate.validate_source(log, off_square, truth, chunk=1000)
     assert lean.f_hat.shape == (0, 3) and lean.observer_rms == pytest.approx(got.observer_rms)
 
 

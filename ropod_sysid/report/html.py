@@ -34,6 +34,7 @@ import jinja2
 import numpy as np
 
 from ropod_sysid import __version__
+from ropod_sysid.chunks import Source, check_source
 from ropod_sysid.crosscheck import RECIPE_LIMITED, recipe_limited
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import (
@@ -42,11 +43,10 @@ from ropod_sysid.fit import (
     FitOptions,
     FitResult,
     LogFit,
-    fit_settings,
     fit_systems,
     mean_correlation,
-    parameters_of,
 )
+from ropod_sysid.fitfile import fit_settings, parameters_of
 from ropod_sysid.forked import default_processes
 from ropod_sysid.io import check_distinct
 from ropod_sysid.io.atomic import atomic_write_text
@@ -68,7 +68,7 @@ from ropod_sysid.report.correlation import correlation_table
 from ropod_sysid.report.painter import Drawn, Painter
 from ropod_sysid.robust import Robust
 from ropod_sysid.solve import STRETCH_S, combined_rms
-from ropod_sysid.stream import Source, StreamResult, check_source, stream_log, stream_pieces
+from ropod_sysid.stream import StreamResult, stream_log, stream_pieces
 from ropod_sysid.summary import (
     compared_values,
     difference,
@@ -116,7 +116,7 @@ def result_from_parameter_file(platform: Platform, logs: Sequence[Source], pfile
     ``threads`` logs are streamed at a time (default
     :func:`ropod_sysid.forked.default_processes`: 2 on a machine with two CPUs or more).
 
-    The file is checked first (:func:`ropod_sysid.fit.parameters_of`). Returns the result and
+    The file is checked first (:func:`ropod_sysid.fitfile.parameters_of`). Returns the result and
     notes for the reader (e.g. that the values are those of a bounded fit).
     """
     if not logs:

@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING, cast, overload
 
 import numpy as np
 
-from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
 from ropod_sysid.errors import InputError
 from ropod_sysid.noise import SensorNoise, predicted_fit_std, predicted_solution
 from ropod_sysid.params import Friction, Parameters
@@ -464,37 +463,8 @@ class CheckReport:
                        "errors of q̈ in A_ID,ext (errors in the variables: a fit shrinks the "
                        "columns they blur); it does not average out over a longer run")
         if self.recipe is not None:
-            out += ["", *self._recipe_text()]
+            out += ["", *self.recipe.text(self.true_values, self.checked_std, self.log_rate)]
         return "\n".join(out)
-
-    def _recipe_text(self) -> list[str]:
-        """The recipe check's predicted shift, the σ a checked fit reports and the default
-        recipe's own error on the run's exact logs."""
-        assert self.recipe is not None
-        rec = self.recipe
-        out = [f"the recipe check (fit's default on logs of up to {AUTO_MAX_SAMPLES:,} samples), "
-               f"predicted on the run's exact logs simulated at {self.log_rate:g} Hz: each "
-               f"value's shift to a fit with {rec.reference}, the σ a checked fit reports "
-               "(√(std² + shift²)) and the default recipe's own error on those logs:",
-               f"{'parameter':<12}{'shift':>12}{'rel. shift':>12}{'σ checked':>12}"
-               f"{'rel. σ':>10}{'error':>12}{'rel. error':>12}"]
-        checked = self.checked_std
-        for j, (n, v) in enumerate(zip(self.names, self.true_values, strict=True)):
-            sh, sd, err = float(rec.shift[j]), float(checked[j]), float(rec.error[j])
-
-            def rel(x: float, v: float = float(v)) -> str:
-                return f"{100 * x / abs(v):+.3g} %" if math.isfinite(x) and v else ""
-
-            out.append(f"{n:<12}{sh:>+12.3g}{rel(sh):>12}"
-                       + (f"{sd:>12.3g}{rel(sd).lstrip('+'):>10}" if math.isfinite(sd)
-                          else f"{'n/a':>12}{'':>10}")
-                       + (f"{err:>+12.3g}{rel(err):>12}" if math.isfinite(err) else ""))
-        out.append("shift and error are the recipes' discretisation biases (the smoothers' "
-                   "attenuation of fast transients, the drives' 1 ms hold), which no noise "
-                   "model gives and a longer run does not shrink; on noisy logs the fit's shift "
-                   "also holds the recipes' different noise, and on quantised logs fitted "
-                   "without --encoder-counts the two recipes' different quantisation bias")
-        return out
 
 
 def check(traj: Trajectory, platform: Platform, limits: Limits | None = None,
