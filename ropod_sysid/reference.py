@@ -33,9 +33,9 @@ __all__ = ["Reference", "ReferenceBudget", "ReferenceTee"]
 @dataclass(frozen=True)
 class Reference:
     """The recipe check's reference pieces of a log, formed in the fit's own pass
-    (:func:`piece_triangles_checked`): the reference recipe's span and what its b_ID was formed
-    at (a delay, or the search's bracket), as :func:`ropod_sysid.crosscheck.reference_options`
-    gave them for the log's sample time."""
+    (:func:`ropod_sysid.stream.piece_triangles_checked`): the reference recipe's span and what
+    its b_ID was formed at (a delay, or the search's bracket), as
+    :func:`ropod_sysid.crosscheck.reference_options` gave them for the log's sample time."""
 
     span: Span
     delay: float | DelayBracket
@@ -52,7 +52,8 @@ class ReferenceBudget:
     left: int | None
 
     def take(self, n: int) -> bool:
-        """Draw ``n`` samples; False (and nothing drawn) when fewer are left."""
+        """Draw ``n`` samples; False when fewer are left, and the budget is then spent (the
+        fit's samples are over the limit: later logs need no reference either)."""
         if self.left is None:
             return True
         if n > self.left:
@@ -77,7 +78,6 @@ class ReferenceTee:
         self.budget = budget
         self.drawn = 0  # samples drawn from the budget
         self.ref: _Blocks | None = None
-        self.dropped = False
 
     def start(self, dt: float, jitter: float = 0.0) -> None:
         self.blocks.start(dt, jitter)
@@ -121,7 +121,6 @@ class ReferenceTee:
     def drop(self) -> None:
         self.close()
         self.ref = None
-        self.dropped = True
 
     def close(self) -> None:
         if self.ref is not None:

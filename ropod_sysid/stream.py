@@ -368,8 +368,7 @@ class _Blocks:
 
 class _Run:
     """The pass over one log, or over one piece of it (--split-gaps); with ``check`` (the
-    fit's options) also the recipe check's reference (:class:`ReferenceTee`), drawing on ``budget``
-    (default: the automatic check's limit for this piece alone)."""
+    fit's options) and ``budget`` also the recipe check's reference (:class:`ReferenceTee`)."""
 
     def __init__(self, name: str, piece: int, first: int, resample: bool,
                  blocks: _Blocks, check: FitOptions | None = None,
@@ -380,10 +379,9 @@ class _Run:
         self.blocks = blocks
         self.tee: ReferenceTee | None = None
         self.detected: int | None = None  # the counts the first chunk's angles move by
-        if check is not None:
+        if check is not None and budget is not None:
             self.tee = ReferenceTee(blocks, lambda dt: self._reference_blocks(check, dt),
-                            budget or ReferenceBudget(crosscheck.AUTO_MAX_SAMPLES
-                                                      if check.recipe_check == "auto" else None))
+                                    budget)
         self.grid = _Grid(name, resample, self.tee or blocks)
         self.notes: list[str] = []
         self.raw = 0  # samples read
@@ -462,9 +460,9 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
     its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
     pieces already there (from a pass stopped by :class:`_OffGrid`) are skipped, and
     ``resample`` puts the first of the others on the uniform grid from its start; ``plot``
-    gathers what the report draws of each piece. With ``check`` (the fit's options) each
-    piece's recipe-check reference goes to ``done_ref`` beside it (:class:`ReferenceTee`; None where
-    it was dropped)."""
+    gathers what the report draws of each piece. With ``check`` (the fit's options) and
+    ``budget`` each piece's recipe-check reference goes to ``done_ref`` beside it
+    (:class:`ReferenceTee`; None where it was dropped)."""
     name = source_name(source)
     restart = len(done)  # the piece the pass restarts at
     chunks = iter_chunks(source, platform, chunk, "allow" if split_gaps else "error")
