@@ -545,6 +545,11 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
     from ropod_sysid.reference import ReferenceBudget
     from ropod_sysid.stream import DEFAULT_CHUNK, piece_triangles, piece_triangles_checked
 
+    at = options.reduce_delay()
+    if formed and all(r is not None and r.span == options.span and r.delay == at
+                      for r in formed):  # the reference fit, its logs formed beside the fit's
+        pieces = [piece for r in formed if r is not None for piece in r.pieces]
+        return _fit(lambda _delay, _plot: pieces, platform, options)
     size = chunk or DEFAULT_CHUNK
     # the reference beside the fit's pass, unless the check is off or surely left out
     beside = options.recipe_check is True or (
@@ -553,9 +558,6 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
     with pool(workers, dask_address, quiet=quiet) as run:
         def reduce(delay: float | DelayBracket, plot: bool,
                    ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
-            if formed and all(r is not None and r.span == options.span and r.delay == delay
-                              for r in formed):
-                return [piece for r in formed if r is not None for piece in r.pieces]
             say(f"reduce {len(paths)} log{'s' if len(paths) > 1 else ''}"
                 + (f" (input delays ±{1000 * delay.top:.0f} ms)"
                    if isinstance(delay, DelayBracket) else
