@@ -500,6 +500,14 @@ def test_cli_curvature_radius_default_and_errors(tmp_path: Path) -> None:
     res = run.invoke(main, [*args, "--curvature-radius-min", "0"])
     data = json.loads(res.output)
     assert data["ok"] is True and data["curvature"]["limit"] is None
+    # with a sensor model: the recipe check's shift is not predicted by default (no compiled
+    # simulator for legs), and the text says so
+    res = run.invoke(main, [*args[:-1], "--current-noise", "0.03"])
+    assert res.exit_code == 0, res.output
+    assert res.output.rstrip().endswith(
+        "note: the recipe check's shift, which fit folds into σ by default, is not predicted: "
+        f"the simulator has no compiled kernel for {LEGS_DATA / 'platform.yaml'}'s units; "
+        "--recipe-check simulates the run in numpy (minutes)")
     out = tmp_path / "x"
     for value in ("-1", "nan"):
         res = run.invoke(main, ["trajectory", "typical", "--platform",
