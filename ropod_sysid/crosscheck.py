@@ -21,6 +21,11 @@ parameter's σ becomes √(σ² + Δ²) (:func:`fold_shift`). On noisy logs Δ a
 recipes' different noise, so σ grows a little where there is no bias (median 1.06–1.17× on
 the benchmark's noisy single runs). What no recipe sees stays out: a bias both share, such as
 point-sampled currents' aliasing (100 Hz logs of the speed loops' ripple).
+
+:func:`ropod_sysid.fit.fit_files` forms the reference recipe's triangles in the fit's own pass
+over the logs (:mod:`ropod_sysid.reference`), so the check costs the second recipe's
+smoothing, rows and solves but no second reading; ``trajectory check`` predicts its shift for
+a planned run (:mod:`ropod_sysid.trajectory.recipe_shift`).
 """
 
 from __future__ import annotations
