@@ -125,7 +125,8 @@ class _Grid:
             self.max_step = max(self.max_step, float(steps.max()))
             self.min_step = min(self.min_step, float(steps.min()))
         if not self.resample:
-            if not on_grid(steps, self.dt):  # type: ignore[arg-type]
+            assert self.dt is not None  # (_emit follows _start)
+            if not on_grid(steps, self.dt):
                 raise _OffGrid
             self.sink.push(raw)
             src = raw  # (only its last sample is used on)
@@ -174,8 +175,8 @@ class _Grid:
             self._resample(self.tail, final=True)
         notes = []
         if self.resample:
-            notes.append(jitter_note(self.source, self.max_step, self.min_step,
-                                     self.dt))  # type: ignore[arg-type]
+            assert self.dt is not None  # (started above)
+            notes.append(jitter_note(self.source, self.max_step, self.min_step, self.dt))
         return notes
 
 

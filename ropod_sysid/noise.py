@@ -184,7 +184,8 @@ def channel_variances(noise: SensorNoise, rates: np.ndarray, order: int,
     kernel = (velocity_kernel if order == 1 else acceleration_kernel)(noise.k, noise.dt,
                                                                      noise.degree)
     full = row_kernel(noise.grid, kernel)
-    counts = int(noise.encoder_counts)  # type: ignore[arg-type]
+    assert noise.encoder_counts is not None  # (the callers' encoder channels)
+    counts = int(noise.encoder_counts)
     step = 2.0 * math.pi / counts
     white = encoder_variance(counts) * float(np.sum(full**2))
     if window_motion is not None:

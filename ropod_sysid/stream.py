@@ -226,7 +226,7 @@ class _Blocks:
         self.tri.duration = (n - 1) * self.dt
         self.tri.correlation = self.grid.correlation
         if self.bracket is not None:
-            self.tri.delays = self.delay  # type: ignore[assignment]
+            self.tri.delays = np.asarray(self.delay)  # (the bracket's node delays)
             self.tri.delay_order = self.bracket.order(self.dt)
         return self.tri, self.obs, n
 
