@@ -16,6 +16,7 @@ import queue
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING
 
 from threadpoolctl import threadpool_limits
@@ -39,16 +40,11 @@ Source = str | Path | Log
 def _iter_path(path: Path, platform: Platform, chunk: int, gaps: Gaps) -> Iterator[Log]:
     name = path.name.lower()
     if name.endswith((".csv", ".csv.gz")):
-        if name.endswith(".csv"):
-            try:
-                from ropod_sysid.io import smartwheel
-            except ImportError:  # pragma: no cover - the smart-wheel layout is optional
-                smartwheel = None  # type: ignore[assignment]
-            if smartwheel is not None and _is_smartwheel(smartwheel, path):
-                # the robot's raw layout needs whole-log processing (frame checks, rates)
-                yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform, gaps),
-                                     chunk)
-                return
+        smartwheel = _smartwheel_reader(path) if name.endswith(".csv") else None
+        if smartwheel is not None:
+            # the robot's raw layout needs whole-log processing (frame checks, rates)
+            yield from _iter_log(smartwheel.read_smartwheel_csv(path, platform, gaps), chunk)
+            return
         from ropod_sysid.io.csvlog import iter_csv_log
 
         yield from iter_csv_log(path, platform, chunk, gaps)
@@ -63,15 +59,25 @@ def _iter_path(path: Path, platform: Platform, chunk: int, gaps: Gaps) -> Iterat
     if is_bag(path):
         yield from iter_bag_log(path, platform, chunk, gaps)
         return
+    raise _unknown_format(path)
+
+
+def _unknown_format(path: Path) -> InputError:
+    name = path.name.lower()
     suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
-    raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a ROS "
-                     "1 .bag or a rosbag2 directory")
+    return InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a ROS "
+                      "1 .bag or a rosbag2 directory")
 
 
-def _is_smartwheel(module: object, path: Path) -> bool:
-    """Whether a .csv is the robot's raw smart-wheel layout (read by its own reader)."""
-    test = getattr(module, "is_smartwheel_csv", None)
-    return bool(test is not None and test(path))
+def _smartwheel_reader(path: Path) -> ModuleType | None:
+    """The smart-wheel reader (:mod:`ropod_sysid.io.smartwheel`, optional) when the .csv
+    ``path`` is the robot's raw smart-wheel layout, else None."""
+    try:
+        from ropod_sysid.io import smartwheel
+    except ImportError:  # pragma: no cover - the smart-wheel layout is optional
+        return None
+    test = getattr(smartwheel, "is_smartwheel_csv", None)
+    return smartwheel if test is not None and test(path) else None
 
 
 def _iter_log(log: Log, chunk: int) -> Iterator[Log]:
@@ -227,16 +233,9 @@ def check_source(source: Source, platform: Platform) -> None:
     from ropod_sysid.io.rosbag import is_bag
 
     if not name.endswith((".csv", ".csv.gz", ".mcap")) and not is_bag(path):
-        suffix = "".join(path.suffixes[-2:]) if name.endswith(".gz") else path.suffix
-        raise InputError(f"{path}: unknown log format '{suffix}'; use .csv, .csv.gz, .mcap, a "
-                         "ROS 1 .bag or a rosbag2 directory")
-    if name.endswith(".csv"):
-        try:
-            from ropod_sysid.io import smartwheel
-        except ImportError:  # pragma: no cover
-            smartwheel = None  # type: ignore[assignment]
-        if smartwheel is not None and path.is_file() and _is_smartwheel(smartwheel, path):
-            return
+        raise _unknown_format(path)
+    if name.endswith(".csv") and path.is_file() and _smartwheel_reader(path) is not None:
+        return
     if name.endswith((".csv", ".csv.gz")):
         from ropod_sysid.io.csvlog import check_csv_header
 

@@ -3,6 +3,8 @@
 Two views: the residual of the direct equations of motion (as in the fit, per DOF), and the
 thesis's disturbance observer (Sec. VII-B): F̂_b from eq. 40, low-passed at 10 Hz, compared with
 the thresholds 40 N / 10 N m of Sec. VII-C. A log with no user input should stay below them.
+:func:`validate_log` takes a log in memory; :func:`validate_source` and
+:func:`validate_sources` read log files in chunks (:mod:`ropod_sysid.stream`).
 """
 
 from __future__ import annotations
@@ -296,7 +298,7 @@ def validate_source(source: Source, platform: Platform, params: DynamicParameter
                     span: Span | None = None, input_delay: float = 0.0,
                     chunk: int = DEFAULT_CHUNK, keep_series: bool = False,
                     row_step: int | None = None) -> LogValidation:
-    """:func:`ropod_sysid.validate.validate_log` of a log read in chunks. The observer series
+    """:func:`validate_log` of a log read in chunks. The observer series
     (``t``, ``f_hat``) are kept only with ``keep_series`` (they grow with the log)."""
     return validate_pieces(source, platform, params, span, input_delay, chunk, keep_series,
                            row_step)[0]
