@@ -182,26 +182,6 @@ def _sensors(current_noise: float | None, encoder_counts: int | None, exact: boo
                        None if exact else (encoder_counts or 2**14), log_rate)
 
 
-def _recipe_by_default(traj: Any, platform: Platform, params: Any, friction: str,
-                       log_rate: float, sensors: bool) -> tuple[bool, str | None]:
-    """``trajectory check``'s default for ``--recipe-check``: with a sensor model (the σ a fit
-    reports), where ``fit`` would check the four variants' logs
-    (:data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES`) and their simulation is compiled; and a
-    note where only the last keeps it off."""
-    from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
-    from ropod_sysid.model.units import check_variant
-    from ropod_sysid.trajectory.precheck import true_parameters
-    from ropod_sysid.trajectory.recipe_shift import simulation_compiled
-
-    if not sensors or 4 * traj.duration * log_rate > AUTO_MAX_SAMPLES:
-        return False, None
-    if simulation_compiled(platform, true_parameters(platform, params), check_variant(friction)):
-        return True, None
-    return False, ("note: the recipe check's shift, which fit folds into σ by default, is not "
-                   f"predicted: the simulator has no compiled kernel for {platform.source}'s "
-                   "units; --recipe-check simulates the run in numpy (minutes)")
-
-
 def _params(path: str | None, platform: Platform) -> Any:
     if path is None:
         return None
@@ -414,8 +394,10 @@ def check_command(traj_path: str, platform_path: str, v_max: float, a_max: float
     params = _params(params_path, platform)
     fl = _floor(floor)
     sensors = _sensors(current_noise, encoder_counts, exact_encoders, log_rate, default=False)
+    from ropod_sysid.trajectory.recipe_shift import predicted_by_default
+
     recipe, why_not = (recipe_check, None) if recipe_check is not None else \
-        _recipe_by_default(traj, platform, params, friction, log_rate, sensors is not None)
+        predicted_by_default(traj, platform, params, friction, log_rate, sensors is not None)
     report = check(traj, platform, limits, fl, noise, params, friction, log_rate,
                    sensors=sensors, recipe=recipe, quiet=False)
     if plot_path is not None:

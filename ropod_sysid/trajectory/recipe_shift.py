@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from ropod_sysid.params import Friction, Parameters
     from ropod_sysid.platform import Platform
     from ropod_sysid.trajectory.setpoints import Trajectory
@@ -81,6 +83,28 @@ def simulation_compiled(platform: Platform, truth: Parameters, friction: Frictio
     from ropod_sysid.simulate import compiled_groups
 
     return compiled_groups(PlatformModel(platform), truth, friction, "auto") is not None
+
+
+def predicted_by_default(traj: Trajectory, platform: Platform,
+                         params: Mapping[str, float] | None, friction: str, log_rate: float,
+                         sensors: bool) -> tuple[bool, str | None]:
+    """``trajectory check``'s default for ``--recipe-check``: with a sensor model (``sensors``:
+    the σ is then the one a fit reports), where ``fit`` would check the four variants' logs
+    at ``log_rate`` (:data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES`) and their simulation is
+    compiled (:func:`simulation_compiled`; ``params`` as
+    :func:`ropod_sysid.trajectory.precheck.true_parameters` takes them); and a note where only
+    the last keeps it off."""
+    from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
+    from ropod_sysid.model.units import check_variant
+    from ropod_sysid.trajectory.precheck import true_parameters
+
+    if not sensors or 4 * traj.duration * log_rate > AUTO_MAX_SAMPLES:
+        return False, None
+    if simulation_compiled(platform, true_parameters(platform, params), check_variant(friction)):
+        return True, None
+    return False, ("note: the recipe check's shift, which fit folds into σ by default, is not "
+                   f"predicted: the simulator has no compiled kernel for {platform.source}'s "
+                   "units; --recipe-check simulates the run in numpy (minutes)")
 
 
 def predicted_recipe_shift(traj: Trajectory, platform: Platform, truth: Parameters,
