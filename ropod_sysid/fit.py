@@ -8,6 +8,7 @@ solved in the least-squares sense (eq. 38) — here by QR triangles (:mod:`ropod
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -16,7 +17,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from ropod_sysid.crosscheck import checked
+from ropod_sysid.crosscheck import checked, first_samples, reference_budget
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
@@ -488,8 +489,14 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
                         pre.notes + ([note] if note else []), None))
         return out
 
+    def prefix(reference: FitOptions) -> tuple[FitResult, FitResult]:
+        budget = reference_budget("auto", sum(log.n_samples for log in logs))
+        cut = first_samples(logs, budget)
+        return (fit_logs(cut, platform, dataclasses.replace(options, recipe_check=False)),
+                fit_logs(cut, platform, reference))
+
     return checked(_fit(reduce, platform, options),
-                   lambda ref: fit_logs(logs, platform, ref, progress), say)
+                   lambda ref: fit_logs(logs, platform, ref, progress), say, prefix)
 
 
 def fit_files(paths: Sequence[str | Path], platform: Platform,
@@ -528,7 +535,28 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
     result = _fit_paths(names, platform, options, workers, dask_address, chunk, say, quiet,
                         plots, formed)
     return checked(result, lambda ref: _fit_paths(names, platform, ref, workers, dask_address,
-                                                  chunk, say, quiet, False, formed), say)
+                                                  chunk, say, quiet, False, formed), say,
+                   lambda ref: formed_prefix(formed, platform, options, ref))
+
+
+def formed_prefix(formed: Sequence[Reference | None], platform: Platform, options: FitOptions,
+                  reference: FitOptions) -> tuple[FitResult, FitResult] | None:
+    """The recipe check of logs longer than its budget (:func:`ropod_sysid.crosscheck.checked`):
+    the fit under ``options`` and the reference fit under ``reference``, both of the samples
+    the reference was formed on in the fit's pass (:attr:`Reference.main`,
+    :attr:`Reference.pieces`); None where it was not formed for every log, or at another
+    span or delay than ``reference`` asks."""
+    if not formed or any(r is None for r in formed):
+        return None
+    refs = [r for r in formed if r is not None and r.pieces]
+    at = reference.reduce_delay()
+    if not refs or any(r.span != reference.span or r.delay != at for r in refs):
+        return None
+    main = [piece for r in refs for piece in r.main]
+    pieces = [piece for r in refs for piece in r.pieces]
+    plain = dataclasses.replace(options, recipe_check=False)
+    return (_fit(lambda _delay, _plot: main, platform, plain),
+            _fit(lambda _delay, _plot: pieces, platform, reference))
 
 
 def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
@@ -540,21 +568,20 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
     ``options.recipe_check`` is False) and puts it there; filled, the reference fit takes its
     logs from it where they match its recipe, instead of reading them again."""
     from ropod_sysid.chunks import fewest_samples
-    from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES
     from ropod_sysid.distributed import pool
     from ropod_sysid.reference import ReferenceBudget
     from ropod_sysid.stream import DEFAULT_CHUNK, piece_triangles, piece_triangles_checked
 
     at = options.reduce_delay()
-    if formed and all(r is not None and r.span == options.span and r.delay == at
-                      for r in formed):  # the reference fit, its logs formed beside the fit's
+    if formed and all(r is not None and not r.partial and r.span == options.span
+                      and r.delay == at for r in formed):  # the reference fit, its logs
+        # formed beside the fit's
         pieces = [piece for r in formed if r is not None for piece in r.pieces]
         return _fit(lambda _delay, _plot: pieces, platform, options)
     size = chunk or DEFAULT_CHUNK
-    # the reference beside the fit's pass, unless the check is off or surely left out
-    beside = options.recipe_check is True or (
-        options.recipe_check == "auto"
-        and sum(fewest_samples(p) for p in paths) <= AUTO_MAX_SAMPLES)
+    # the reference beside the fit's pass, unless the check is off; on the first samples of
+    # logs over its budget
+    beside = options.recipe_check is not False
     with pool(workers, dask_address, quiet=quiet) as run:
         def reduce(delay: float | DelayBracket, plot: bool,
                    ) -> list[tuple[str, Triangles, list[str], LogPlot | None]]:
@@ -564,8 +591,8 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
                    f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
             if beside and not formed:
                 # serially the logs share one budget (on Dask each log has a copy)
-                budget = ReferenceBudget(AUTO_MAX_SAMPLES if options.recipe_check == "auto"
-                                         else None)
+                budget = ReferenceBudget(reference_budget(
+                    options.recipe_check, sum(fewest_samples(p) for p in paths)))
                 both = run(piece_triangles_checked, paths, platform=platform, check=options,
                            input_delay=delay, chunk=size, plot=plot and plots, budget=budget)
                 formed.extend(ref for _, ref in both)

@@ -25,9 +25,23 @@ if TYPE_CHECKING:
     from ropod_sysid.plotdata import LogPlot
     from ropod_sysid.regressor import DelayBracket, Span
     from ropod_sysid.solve import Triangles
-    from ropod_sysid.stream import _Blocks
+    from ropod_sysid.stream import StreamResult, _Blocks
 
-__all__ = ["Reference", "ReferenceBudget", "ReferenceTee"]
+__all__ = ["PieceReference", "Reference", "ReferenceBudget", "ReferenceTee"]
+
+
+@dataclass(frozen=True)
+class PieceReference:
+    """The reference of one piece of a log (a log without gaps is one piece), from its
+    :class:`ReferenceTee`: the reference recipe's span, delay and triangles (``result``;
+    None with the span and delay when the budget was spent before the piece), and where the
+    budget ended inside the piece the fit's own triangles of the rows up to the same sample
+    (``main``; None: the piece's own)."""
+
+    span: Span | None
+    delay: float | DelayBracket | None
+    result: StreamResult | None
+    main: Triangles | None = None
 
 
 @dataclass(frozen=True)
@@ -37,9 +51,13 @@ class Reference:
     its b_ID was formed at (a delay, or the search's bracket), as
     :func:`ropod_sysid.crosscheck.reference_options` gave them for the log's sample time."""
 
-    span: Span
-    delay: float | DelayBracket
+    span: Span | None  # (None: no piece of the log within the budget)
+    delay: float | DelayBracket | None
     pieces: list[tuple[str, Triangles, list[str], LogPlot | None]]
+    # the fit's own pieces over the reference's samples (the rows up to the cut in a piece the
+    # budget ended in; none of the pieces past it)
+    main: list[tuple[str, Triangles, list[str], LogPlot | None]]
+    partial: bool = False  # the budget ended inside the log, or before it
 
 
 @dataclass
@@ -51,36 +69,44 @@ class ReferenceBudget:
 
     left: int | None
 
-    def take(self, n: int) -> bool:
-        """Draw ``n`` samples; False when fewer are left, and the budget is then spent (the
-        fit's samples are over the limit: later logs need no reference either)."""
+    def take(self, n: int) -> int:
+        """Draw ``n`` samples: how many were left of them (all but where the budget ends)."""
         if self.left is None:
-            return True
-        if n > self.left:
-            self.left = -1  # spent: later logs too
-            return False
-        self.left -= n
-        return True
+            return n
+        got = min(n, self.left)
+        self.left -= got
+        return got
+
+    @property
+    def spent(self) -> bool:
+        return self.left is not None and self.left <= 0
 
 
 class ReferenceTee:
     """The grid's sink of a pass that also forms the recipe check's reference triangles
     (:mod:`ropod_sysid.crosscheck`) from the same samples, so that the check needs no second
     reading of the log. The reference's blocks are made once the sample time is known (its
-    span and delay bracket depend on it); an :class:`InputError` of the reference (a log too
-    short for its span) or more samples than its ``budget`` holds drops it, and the check then
-    reads the log again (or is left out)."""
+    span and delay bracket depend on it). Where the ``budget`` ends the reference is cut: its
+    triangles are finished there and the fit's rows up to the same sample kept apart
+    (:meth:`ropod_sysid.stream._Blocks.mark_rows`); a budget spent before the piece starts
+    forms none (:attr:`past`). An :class:`InputError` of the reference (a log too short for
+    its span) drops it, and the check then reads the log again (or is left out)."""
 
     def __init__(self, blocks: _Blocks, make: Callable[[float], _Blocks],
                  budget: ReferenceBudget) -> None:
         self.blocks = blocks
         self.make = make
         self.budget = budget
-        self.drawn = 0  # samples drawn from the budget
+        self.before = budget.left  # (refund)
         self.ref: _Blocks | None = None
+        self.past = False  # the budget was spent before this piece
+        self.cut: tuple[Triangles, float | DelayBracket] | None = None
 
     def start(self, dt: float, jitter: float = 0.0) -> None:
         self.blocks.start(dt, jitter)
+        if self.budget.spent:
+            self.past = True
+            return
         try:
             self.ref = self.make(dt)
             self.ref.start(dt, jitter)
@@ -88,20 +114,38 @@ class ReferenceTee:
             self.drop()
 
     def push(self, samples: _Samples) -> None:
+        if self.ref is not None and self.cut is None:  # (first: the fit's rows not yet past
+            n = self.budget.take(len(samples))         # the cut)
+            try:
+                self.ref.push(samples if n == len(samples) else samples.take(0, n))
+            except InputError:
+                self.drop()
+            else:
+                if self.budget.spent:
+                    self._cut()
         self.blocks.push(samples)
-        if self.ref is None:
-            return
-        if not self.budget.take(len(samples)):
-            self.drop()
-            return
-        self.drawn += len(samples)
+
+    def _cut(self) -> None:
+        """The budget ends here: the reference's triangles of the samples it has, and the
+        fit's rows up to its last kept sample kept apart; too few samples for the reference
+        recipe's span, and the piece has none (:attr:`past`)."""
+        ref = self.ref
+        assert ref is not None
         try:
-            self.ref.push(samples)
+            self.cut = ref.finish()[0], (ref.bracket if ref.bracket is not None
+                                         else float(ref.delay))
         except InputError:
+            self.past = True
             self.drop()
+            return
+        self.blocks.mark_rows(ref.avail - ref.trim)
+        ref.close()
+        ref.parts = []  # (its samples: not needed any more)
 
     def finish(self) -> tuple[Triangles, float | DelayBracket] | None:
         """The reference's triangles and what its b_ID was formed at; None if dropped."""
+        if self.cut is not None:
+            return self.cut
         if self.ref is None:
             return None
         ref = self.ref
@@ -113,10 +157,8 @@ class ReferenceTee:
         return tri, (ref.bracket if ref.bracket is not None else float(ref.delay))
 
     def refund(self) -> None:
-        """Give the samples drawn back to the budget (the piece will be passed again)."""
-        if self.budget.left is not None and self.budget.left >= 0:
-            self.budget.left += self.drawn
-        self.drawn = 0
+        """Give the budget back what it held before this piece (it will be passed again)."""
+        self.budget.left = self.before
 
     def drop(self) -> None:
         self.close()

@@ -62,6 +62,7 @@ from ropod_sysid.chunks import (
     DEFAULT_CHUNK,
     Source,
     _prefetch,
+    fewest_samples,
     iter_chunks,
     single_thread_blas,
     source_name,
@@ -77,7 +78,12 @@ from ropod_sysid.params import DynamicParameters, Friction
 from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.recipe import delay_reach
-from ropod_sysid.reference import Reference, ReferenceBudget, ReferenceTee
+from ropod_sysid.reference import (
+    PieceReference,
+    Reference,
+    ReferenceBudget,
+    ReferenceTee,
+)
 from ropod_sysid.regressor import (
     DelayBracket,
     Preprocessed,
@@ -182,6 +188,10 @@ class _Blocks:
         self.odo: OdometryState | None = None
         self.jitter = 0.0  # half-width of the sample instants' jitter (start(): grid_jitter)
         self.obs = ObserverStats() if params is not None else None
+        # mark_rows: the kept sample up to which the rows' triangles are also kept apart
+        self.mark: int | None = None
+        self.marked: Triangles | None = None
+        self.snapped = False
         # the rows of block i are reduced in a worker thread while block i+1 is smoothed (numpy
         # releases the GIL in its loops); one worker keeps the merge order of the triangles
         self.worker = (ThreadPoolExecutor(1, thread_name_prefix="ropod-sysid-rows")
@@ -222,13 +232,39 @@ class _Blocks:
         self._wait(0)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
-        self.tri.samples = n - 2 * self.trim
-        self.tri.duration = (n - 1) * self.dt
-        self.tri.correlation = self.grid.correlation
-        if self.bracket is not None:
-            self.tri.delays = np.asarray(self.delay)  # (the bracket's node delays)
-            self.tri.delay_order = self.bracket.order(self.dt)
+        if self.mark is not None and not self.snapped:  # the piece ended before the mark
+            self._snapshot()
+        if self.marked is not None and self.marked is not self.tri:
+            assert self.mark is not None
+            self._finish_triangles(self.marked, self.mark + self.trim)
+        self._finish_triangles(self.tri, n)
         return self.tri, self.obs, n
+
+    def _finish_triangles(self, tri: Triangles, n: int) -> None:
+        """What the triangles of the rows of samples [0, n) carry besides the rows."""
+        tri.samples = n - 2 * self.trim
+        tri.duration = (n - 1) * self.dt
+        tri.correlation = self.grid.correlation
+        if self.bracket is not None:
+            tri.delays = np.asarray(self.delay)  # (the bracket's node delays)
+            tri.delay_order = self.bracket.order(self.dt)
+
+    def mark_rows(self, index: int) -> None:
+        """Keep the triangles of the rows before kept sample ``index`` apart
+        (:attr:`marked`, after :meth:`finish`): a block ends there (``index`` is taken up
+        to the row grid), or here if the rows already reach past it. The recipe check's
+        reference cut by its budget (:class:`ropod_sysid.reference.ReferenceTee`) is
+        compared with them."""
+        step = self.grid.step
+        index = self.trim + max(0, -(-(index - self.trim) // step)) * step
+        self.mark = max(index, self.s)
+        if self.mark == self.s:
+            self._submit(self._snapshot)
+
+    def _snapshot(self) -> None:
+        """(In the rows' thread, after the blocks before the mark.)"""
+        self.marked = self.tri
+        self.snapped = True
 
     def close(self) -> None:
         """Stop the worker thread (also after an error: queued blocks are dropped)."""
@@ -252,19 +288,22 @@ class _Blocks:
         c = self.c
         while True:
             s = self.s
+            mark = self.mark if self.mark is not None and self.mark > s else None
             if n is not None:
                 end = n - self.trim
                 if s >= end:
                     return
-                e = min(s + self.block, end)
+                e = min(s + self.block, end, mark or end)
                 last = e == end
             else:
-                e = s + self.block
+                e = min(s + self.block, mark or s + self.block)
                 if e + self.halo + self.reach + max(c, self.lookahead) > self.avail:
                     return
                 last = False
             self._reduce(s, e, last, n)
             self.s = e
+            if e == mark:
+                self._submit(self._snapshot)
             # keep what the next block reaches back to
             keep = max(0, min(e - self.halo - self.reach - c, e - self.halo - self.lookback))
             self._drop_before(keep)
@@ -399,18 +438,27 @@ class _Run:
             ref.search_counts = self.detected
         return ref
 
-    def reference(self) -> tuple[Span, float | DelayBracket, StreamResult] | None:
-        """The reference recipe's span, delay and result, after :meth:`finish`; None without
-        one (no check asked, or dropped)."""
-        if self.tee is None or self.tee.ref is None:
+    def reference(self) -> PieceReference | None:
+        """The piece's reference (:class:`PieceReference`) after :meth:`finish`; None without
+        one (no check asked, or dropped: an error of the reference recipe)."""
+        tee = self.tee
+        if tee is None:
             return None
-        ref = self.tee.ref
-        got = self.tee.finish()
-        if got is None:
+        if tee.past:
+            return PieceReference(None, None, None)
+        ref = tee.ref
+        got = tee.finish()
+        if got is None or ref is None:
             return None
         tri, delay = got
-        return ref.span, delay, StreamResult(self.blocks.source, tri, [], ref.avail, ref.dt,
-                                             ref.k)
+        main = None
+        if tee.cut is not None:
+            main = self.blocks.marked
+            if main is None:  # no row of the fit's before the cut
+                return PieceReference(None, None, None)
+        return PieceReference(ref.span, delay,
+                              StreamResult(self.blocks.source, tri, [], ref.avail, ref.dt,
+                                           ref.k), main)
 
     def close(self) -> None:
         self.blocks.close()
@@ -454,7 +502,7 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
           resample: bool, prefetch: bool, row_step: int | None, split_gaps: bool,
           done: list[StreamResult | None], dropped: list[str], plot: bool = False,
           encoder_counts: int | None = None, check: FitOptions | None = None,
-          done_ref: list[tuple[Span, float | DelayBracket, StreamResult] | None] | None = None,
+          done_ref: list[PieceReference | None] | None = None,
           budget: ReferenceBudget | None = None) -> None:
     """One pass over a log; with ``split_gaps`` over each piece between its gaps as a log of
     its own. Finished pieces go to ``done`` (None: too short, with a note in ``dropped``);
@@ -494,8 +542,10 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
         if run.name != name:
             res.triangles.label = run.name
             res.notes.insert(0, piece_note(run.name, name, run.first, run.raw, run.t0, run.t1))
-            if ref is not None:
-                ref[2].triangles.label = run.name
+            if ref is not None and ref.result is not None:
+                ref.result.triangles.label = run.name
+                if ref.main is not None:
+                    ref.main.label = run.name
         done.append(res)
         if done_ref is not None:
             done_ref.append(ref)
@@ -532,8 +582,8 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
                   keep_series: bool = False, prefetch: bool = True,
                   row_step: int | None = None, split_gaps: bool = False, plot: bool = False,
                   encoder_counts: int | None = None, check: FitOptions | None = None,
-                  references: list[tuple[Span, float | DelayBracket, StreamResult] | None]
-                  | None = None, budget: ReferenceBudget | None = None) -> list[StreamResult]:
+                  references: list[PieceReference | None] | None = None,
+                  budget: ReferenceBudget | None = None) -> list[StreamResult]:
     """:func:`stream_log`; with ``split_gaps`` a log with gaps in time
     (:mod:`ropod_sysid.io.timebase`) gives one result per piece between them, each a log of
     its own (its grid, its smoother ends), named ``run.csv[2]`` …; a piece too short for the
@@ -548,12 +598,12 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
         raise InputError(f"chunk size {chunk}: must be a positive number of samples")
     RowGrid.check_step(row_step)  # a bad row step fails before the file is opened
     done: list[StreamResult | None] = []
-    done_ref: list[tuple[Span, float | DelayBracket, StreamResult] | None] = []
+    done_ref: list[PieceReference | None] = []
     dropped: list[str] = []
     resample = False
     if check is not None and budget is None:  # the pieces of a log share one
-        budget = ReferenceBudget(crosscheck.AUTO_MAX_SAMPLES if check.recipe_check == "auto"
-                                 else None)
+        budget = ReferenceBudget(crosscheck.reference_budget(check.recipe_check,
+                                                             fewest_samples(source)))
     with single_thread_blas():
         while True:
             try:
@@ -627,23 +677,33 @@ def piece_triangles_checked(source: Source, platform: Platform, check: FitOption
     """:func:`piece_triangles` under the fit's options ``check`` (their span, friction, row
     step, pieces and encoder counts; b_ID at ``input_delay``), and from the same samples the
     recipe check's reference (:mod:`ropod_sysid.crosscheck`): the pieces the reference fit's
-    own pass would give, so that the check reads the log once. The reference is None where it
-    could not be formed here — a piece too short for its span, more samples than ``budget``
-    holds (default: :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` with
-    ``recipe_check="auto"``; :class:`ReferenceBudget`, which the logs of one fit share when
-    they are reduced serially), or pieces whose sample times give different reference spans —
-    and the check then reads the log again (or is left out)."""
-    refs: list[tuple[Span, float | DelayBracket, StreamResult] | None] = []
+    own pass would give, so that the check reads the log once. The samples it is formed on are
+    drawn from ``budget`` (default: :func:`ropod_sysid.crosscheck.reference_budget` of the
+    log; :class:`ReferenceBudget`, which the logs of one fit share when they are reduced
+    serially): where it ends inside the log the reference is cut there and
+    :attr:`Reference.main` holds the fit's own rows up to the same sample
+    (:attr:`Reference.partial`). The reference is None where it could not be formed here — a
+    piece too short for its span, or pieces whose sample times give different reference
+    spans — and the check then reads the log again (or is left out)."""
+    refs: list[PieceReference | None] = []
     res = stream_pieces(source, platform, check.span, input_delay, check.friction, chunk,
                         row_step=check.row_step, split_gaps=check.split_gaps, plot=plot,
                         encoder_counts=check.encoder_counts, check=check, references=refs,
                         budget=budget)
     pieces = [(r.source, r.triangles, r.notes, r.plot) for r in res]
-    got = [ref for ref in refs if ref is not None]
-    if not got or len(got) != len(refs):
+    if any(ref is None for ref in refs):
         return pieces, None
-    span, delay, _ = got[0]
-    if any(g[0] != span or g[1] != delay for g in got):
+    got = [(piece, ref) for piece, ref in zip(pieces, refs, strict=True)
+           if ref is not None and ref.result is not None]
+    partial = len(got) < len(refs) or any(ref.main is not None for _, ref in got)
+    if not got:
+        return pieces, Reference(None, None, [], [], partial)
+    span, delay = got[0][1].span, got[0][1].delay
+    if any(ref.span != span or ref.delay != delay for _, ref in got):
         return pieces, None
-    return pieces, Reference(span, delay, [(r.source, r.triangles, r.notes, r.plot)
-                                           for _, _, r in got])
+    return pieces, Reference(
+        span, delay,
+        [(r.source, r.triangles, r.notes, r.plot) for _, ref in got
+         if (r := ref.result) is not None],
+        [(name, tri if ref.main is None else ref.main, [], None)
+         for (name, tri, _, _), ref in got], partial)

@@ -119,26 +119,56 @@ def test_recipe_check_of_files_as_of_logs(tmp_path, off_square, varied_run):
     assert unchecked["parameters"]["m_b"]["std"] < data["parameters"]["m_b"]["std"]
 
 
-def test_automatic_check_leaves_long_logs_with_a_note(monkeypatch, off_square, varied_run):
-    """"auto" (the default) checks logs of up to AUTO_MAX_SAMPLES samples; above, σ stays the
-    jackknife's and the first log's notes say so and how to include the bias."""
+def test_automatic_check_of_long_logs_on_their_first_samples(monkeypatch, off_square,
+                                                             varied_run):
+    """"auto" (the default) checks logs of up to AUTO_MAX_SAMPLES samples whole; on longer
+    ones it measures the shift between the two recipes on the logs' first samples and folds
+    it into the whole fit's σ, with a note; where that cannot be fitted σ stays the
+    jackknife's and the note says so and how to include the bias."""
     assert FitOptions().recipe_check == "auto"
     with pytest.raises(InputError, match=r"^recipe_check 'yes': use True \(--recipe-check\), "
                        r"False \(--no-recipe-check\) or 'auto' \(the default\)$"):
         FitOptions(recipe_check="yes")  # type: ignore[arg-type]
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", 10_000)  # the run: 12,001 samples
+    assert crosscheck.reference_budget("auto", varied_run.n_samples) == 10_000
+    assert crosscheck.reference_budget(True, varied_run.n_samples) is None
     long = fit_logs([varied_run], off_square)
     plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
-    np.testing.assert_array_equal(long.solution.std, plain.solution.std)
-    assert long.recipe_shift is None
+    first = [varied_run.slice(0, 10_000)]
+    base = fit_logs(first, off_square, FitOptions(recipe_check=False))
+    ref = fit_logs(first, off_square, crosscheck.reference_options(FitOptions(), 0.005))
+    shift = base.solution.values - ref.solution.values
+    np.testing.assert_array_equal(long.solution.values, plain.solution.values)
+    np.testing.assert_allclose(long.solution.std, np.hypot(plain.solution.std, shift),
+                               rtol=1e-12)
+    assert list(long.recipe_shift.values()) == pytest.approx(shift, rel=1e-12, abs=0)
+    assert long.recipe_reference == ("--smoother quartic --span 0.1s --input-delay auto on "
+                                     f"the logs' first {base.samples:,} samples")
     assert long.logs[0].notes[-1] == (
-        f"recipe check left out: the logs have {long.samples:,} samples, more than the "
-        "10,000 up to which fit runs it by default; σ is the jackknife's alone and does "
-        "not include the recipe's bias (docs/accuracy.md); add --recipe-check to include it "
-        "(1.4-1.8 times the fit's time)")
+        f"recipe check on the logs' first {base.samples:,} of {long.samples:,} samples (fit "
+        "checks all of them by default up to 10,000): σ includes the shift between the two "
+        "recipes measured there, the recipe's bias, which more data do not shrink; add "
+        "--recipe-check to measure it on all of them (1.4-1.8 times the fit's time)")
     assert not any("recipe check" in note for note in plain.logs[0].notes)
     forced = fit_logs([varied_run], off_square, FitOptions(recipe_check=True))
-    assert forced.recipe_shift is not None
+    assert forced.recipe_shift is not None and "first" not in forced.recipe_reference
+    # first samples too few for the quartic's span: σ the jackknife's, and the note
+    monkeypatch.setattr(crosscheck, "PREFIX_SAMPLES", 15)
+    short = fit_logs([varied_run], off_square)
+    np.testing.assert_array_equal(short.solution.std, plain.solution.std)
+    assert short.recipe_shift is None
+    assert short.logs[0].notes[-1].startswith(
+        "recipe check left out: its fits of the logs' first samples (--smoother quartic "
+        "--span 0.1s --input-delay auto) failed: ")
+    left_out = crosscheck.checked(
+        dataclasses.replace(plain, options=FitOptions(),
+                            logs=[dataclasses.replace(lf, notes=[]) for lf in plain.logs]),
+        lambda _: plain, lambda _: None, lambda _: None)
+    assert left_out.logs[0].notes == [
+        f"recipe check left out: the logs have {plain.samples:,} samples, more than the "
+        "10,000 up to which fit runs it by default; σ is the jackknife's alone and does "
+        "not include the recipe's bias (docs/accuracy.md); add --recipe-check to include it "
+        "(1.4-1.8 times the fit's time)"]
 
 
 def test_automatic_check_whose_reference_fails_keeps_sigma(off_square, varied_run):
@@ -254,11 +284,14 @@ def test_reference_of_pieces_between_gaps(tmp_path, monkeypatch, off_square, var
     np.testing.assert_allclose(once.solution.std, twice.solution.std, rtol=1e-12, atol=0)
 
 
-def test_reference_left_out_of_the_pass_of_long_logs(tmp_path, monkeypatch, off_square,
-                                                     varied_run):
-    """A log surely longer than the automatic check's limit (its bytes over the longest rows)
-    is read without the reference; one whose length is not known beforehand has it dropped at
-    the limit: either way one reading, σ the jackknife's and the note."""
+def test_reference_of_long_logs_cut_in_the_pass(tmp_path, monkeypatch, off_square,
+                                                varied_run):
+    """A log longer than the automatic check's limit gets its reference on its first samples
+    in the fit's own pass — PREFIX_SAMPLES of a CSV log surely longer (its bytes over the
+    longest rows), AUTO_MAX_SAMPLES of one whose length is not known beforehand — cut at the
+    budget's end, with the fit's rows up to the same sample kept apart: one reading, the
+    fit's values unchanged, σ widened by the shift measured there (as the in-memory fit of
+    the first samples gives it, to the rows at the cut), and the note."""
     from ropod_sysid import stream
     from ropod_sysid.chunks import fewest_samples
 
@@ -270,23 +303,35 @@ def test_reference_left_out_of_the_pass_of_long_logs(tmp_path, monkeypatch, off_
     assert fewest_samples(varied_run) == varied_run.n_samples
     plain = fit_files([log], off_square, FitOptions(recipe_check=False))
     reads = _counting(monkeypatch, stream, "iter_chunks")
-    beside = _counting(monkeypatch, stream, "piece_triangles_checked")
+    monkeypatch.setattr(crosscheck, "PREFIX_SAMPLES", 9_000)
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", fewest_samples(log) - 1)
-    surely = fit_files([log], off_square)
-    assert (len(reads), len(beside)) == (1, 0)
+    surely = fit_files([log], off_square, chunk=1000)
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", fewest_samples(log))
-    dropped = fit_files([log], off_square)
-    assert (len(reads), len(beside)) == (2, 1)
-    for fit in (surely, dropped):
-        np.testing.assert_array_equal(fit.solution.std, plain.solution.std)
-        assert fit.logs[0].notes[-1].startswith("recipe check left out: the logs have ")
+    found = fit_files([log], off_square, chunk=1000)
+    assert len(reads) == 2
+    for fit, first in ((surely, min(9_000, fewest_samples(log) - 1)),
+                       (found, fewest_samples(log))):
+        np.testing.assert_allclose(fit.solution.values, plain.solution.values, rtol=1e-9)
+        head = [varied_run.slice(0, first)]
+        base = fit_logs(head, off_square, FitOptions(recipe_check=False))
+        ref = fit_logs(head, off_square, crosscheck.reference_options(FitOptions(), 0.005))
+        shift = base.solution.values - ref.solution.values
+        # (the rows at the cut: the pass smooths them with the samples after it)
+        np.testing.assert_allclose(list(fit.recipe_shift.values()), shift, rtol=1e-3,
+                                   atol=1e-4 * np.abs(shift).max())
+        np.testing.assert_allclose(fit.solution.std, np.hypot(plain.solution.std, shift),
+                                   rtol=1e-2)
+        assert any(fit.logs[0].notes[-1].startswith(
+            f"recipe check on the logs' first {n:,} of {plain.samples:,} samples (fit checks")
+            for n in (base.samples - 1, base.samples))  # (the rows' grid at the cut)
 
 
 def test_logs_of_one_fit_share_the_references_budget(tmp_path, monkeypatch, off_square,
                                                      varied_run):
     """Serially the logs of one fit draw on one budget of AUTO_MAX_SAMPLES: two logs each
-    under it but together over it form the first's reference, not the second's, and the fit
-    keeps the jackknife's σ with the note; each log read once."""
+    under it but together over it form the first's reference whole and the second's cut
+    where the budget ends (compared with the fit's rows up to there), and the fit's σ holds
+    the shift measured on those samples, with the note; each log read once."""
     from ropod_sysid import stream
 
     paths = [tmp_path / "a.csv", tmp_path / "b.csv"]
@@ -294,19 +339,18 @@ def test_logs_of_one_fit_share_the_references_budget(tmp_path, monkeypatch, off_
     write_csv_log(dataclasses.replace(varied_run, currents=1.001 * varied_run.currents),
                   paths[1])  # (not a copy of the first)
     real = stream.piece_triangles_checked
-    formed: list[bool] = []
+    formed: list[tuple[bool, bool]] = []
 
     def spy(*args, **kwargs):
         out = real(*args, **kwargs)
-        formed.append(out[1] is not None)
+        formed.append((out[1].partial, out[1].main[0][1] is not out[0][0][1]))
         return out
 
     monkeypatch.setattr(stream, "piece_triangles_checked", spy)
     reads = _counting(monkeypatch, stream, "iter_chunks")
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", 3 * varied_run.n_samples // 2)
     fit = fit_files(paths, off_square)
-    assert formed == [True, False] and len(reads) == 2
+    assert formed == [(False, False), (True, True)] and len(reads) == 2
     plain = fit_files(paths, off_square, FitOptions(recipe_check=False))
-    np.testing.assert_array_equal(fit.solution.std, plain.solution.std)
-    note = f"recipe check left out: the logs have {fit.samples:,} samples, more than the "
-    assert fit.logs[0].notes[-1].startswith(note)
+    assert np.all(fit.solution.std > plain.solution.std)
+    assert fit.logs[0].notes[-1].startswith("recipe check on the logs' first ")

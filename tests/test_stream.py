@@ -138,14 +138,16 @@ def test_jitter_after_the_head_restarts_the_pass(off_square, runs_off_square, mo
 def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypatch):
     """The recipe check's reference formed beside the fit's blocks (ReferenceTee) survives
     the restart in resampling mode and equals a pass of its own recipe; past the automatic
-    check's limit it is dropped, the fit's own triangles unchanged."""
+    check's limit it is cut, the fit's own triangles unchanged."""
     from ropod_sysid import crosscheck
 
     log = jittered_after_the_head(off_square, runs_off_square[2], monkeypatch)
     refs: list = []
     res = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(recipe_check=True),
                                references=refs)
-    (span, delay, ref), = refs
+    (piece,) = refs
+    span, delay, ref = piece.span, piece.delay, piece.result
+    assert piece.main is None
     ref_options = crosscheck.reference_options(FitOptions(), res[0].dt)
     assert (span, delay) == (ref_options.span, ref_options.reduce_delay())
     alone = stream.stream_log(log, off_square, span=span, input_delay=delay, chunk=200)
@@ -156,14 +158,21 @@ def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypa
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) + 10)
     refs.clear()
     stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(), references=refs)
-    assert refs[0] is not None
-    assert_same_triangles(alone.triangles, refs[0][2].triangles)
+    assert refs[0] is not None and refs[0].main is None
+    assert_same_triangles(alone.triangles, refs[0].result.triangles)
+    # past it the reference is cut, and the fit's rows up to the cut kept apart; the fit's
+    # own triangles are those of the pass without the check
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) - 1)
     refs.clear()
     over = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(),
                                 references=refs)
-    assert refs == [None]
-    assert_same_triangles(res[0].triangles, over[0].triangles)
+    (cut,) = refs
+    assert cut.result is not None and cut.main is not None
+    assert cut.result.samples == len(log.t) - 1  # (the budget, to the sample)
+    step = over[0].triangles.rows / over[0].triangles.samples
+    assert abs(cut.main.rows - step * cut.result.triangles.samples) <= 0.05 * cut.main.rows
+    assert cut.main.rows < over[0].triangles.rows
+    assert_same_triangles(res[0].triangles, over[0].triangles, rel=1e-9)
 
 
 def test_wrapped_angles_tracker_pose_and_input_delay(off_square, runs_off_square):
