@@ -1,6 +1,6 @@
 """The recipe check: fold the recipe's own bias into σ by fitting the logs a second way
-(``fit``'s default on logs of up to :data:`AUTO_MAX_SAMPLES` samples; ``--recipe-check``,
-``--no-recipe-check``).
+(``fit``'s default, on longer logs than :data:`AUTO_MAX_SAMPLES` samples measured on their
+first samples; ``--recipe-check``, ``--no-recipe-check``).
 
 σ (:func:`ropod_sysid.solve.jackknife_covariance`) is the spread of the values over the logs'
 stretches: it sees errors that vary from stretch to stretch and none that every stretch shares.
@@ -26,6 +26,17 @@ point-sampled currents' aliasing (100 Hz logs of the speed loops' ripple).
 over the logs (:mod:`ropod_sysid.reference`), so the check costs the second recipe's
 smoothing, rows and solves but no second reading; ``trajectory check`` predicts its shift for
 a planned run (:mod:`ropod_sysid.trajectory.recipe_shift`).
+
+Longer logs. The bias is a property of the recipe on the run, which more data do not shrink,
+so the automatic check does not need all of a long log: past its budget
+(:func:`reference_budget`) the reference is cut in the fit's pass, the fit's own rows up to
+the same sample are kept apart (:meth:`ropod_sysid.stream._Blocks.mark_rows`), and Δ is the
+difference of the two recipes' fits of those first samples, folded into the whole fit's σ
+(:func:`checked`, with a note; in memory the same of the logs' first samples,
+:func:`first_samples`). Measured on twenty joined copies of a noisy 60 s 1 kHz run (1.2
+million samples): the jackknife's σ alone keep 79 % of the values within 2σ, the shift over
+all samples 97 %, over the first 200,000 97 % and over the first 1,000,000 (streamed from a
+CSV file too short for its length to be known beforehand) 100 %.
 """
 
 from __future__ import annotations
