@@ -59,6 +59,28 @@ class Reference:
     main: list[tuple[str, Triangles, list[str], LogPlot | None]]
     partial: bool = False  # the budget ended inside the log, or before it
 
+    @staticmethod
+    def of_pieces(pieces: list[tuple[str, Triangles, list[str], LogPlot | None]],
+                  refs: list[PieceReference | None]) -> Reference | None:
+        """The log's reference from its pieces' (``refs``, beside the fit's ``pieces``); None
+        where one was dropped or their spans or delays differ."""
+        if any(ref is None for ref in refs):
+            return None
+        got = [(piece, ref) for piece, ref in zip(pieces, refs, strict=True)
+               if ref is not None and ref.result is not None]
+        partial = len(got) < len(refs) or any(ref.main is not None for _, ref in got)
+        if not got:
+            return Reference(None, None, [], [], partial)
+        span, delay = got[0][1].span, got[0][1].delay
+        if any(ref.span != span or ref.delay != delay for _, ref in got):
+            return None
+        return Reference(
+            span, delay,
+            [(r.source, r.triangles, r.notes, r.plot) for _, ref in got
+             if (r := ref.result) is not None],
+            [(name, tri if ref.main is None else ref.main, [], None)
+             for (name, tri, _, _), ref in got], partial)
+
 
 @dataclass
 class ReferenceBudget:

@@ -691,19 +691,4 @@ def piece_triangles_checked(source: Source, platform: Platform, check: FitOption
                         encoder_counts=check.encoder_counts, check=check, references=refs,
                         budget=budget)
     pieces = [(r.source, r.triangles, r.notes, r.plot) for r in res]
-    if any(ref is None for ref in refs):
-        return pieces, None
-    got = [(piece, ref) for piece, ref in zip(pieces, refs, strict=True)
-           if ref is not None and ref.result is not None]
-    partial = len(got) < len(refs) or any(ref.main is not None for _, ref in got)
-    if not got:
-        return pieces, Reference(None, None, [], [], partial)
-    span, delay = got[0][1].span, got[0][1].delay
-    if any(ref.span != span or ref.delay != delay for _, ref in got):
-        return pieces, None
-    return pieces, Reference(
-        span, delay,
-        [(r.source, r.triangles, r.notes, r.plot) for _, ref in got
-         if (r := ref.result) is not None],
-        [(name, tri if ref.main is None else ref.main, [], None)
-         for (name, tri, _, _), ref in got], partial)
+    return pieces, Reference.of_pieces(pieces, refs)
