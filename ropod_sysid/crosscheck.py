@@ -61,7 +61,7 @@ if TYPE_CHECKING:
 # samples in all: the shipped sample (24,000), up to 16 minutes at 1 kHz. Its reference is
 # formed in the fit's own pass over the logs (:func:`ropod_sysid.stream.piece_triangles_checked`),
 # which it lengthens by 0.3-0.8 s up to here (a 10-minute 1 kHz CSV log 1.1-1.3 -> 2.0-2.1 s).
-# Longer logs are left to ``--recipe-check``.
+# Longer logs are checked on their first samples (below); ``--recipe-check``: on all of them.
 AUTO_MAX_SAMPLES = 1_000_000
 # On longer logs the automatic check measures the shift on the fit's first samples: as many as
 # AUTO_MAX_SAMPLES where the length is found while reading (MCAP), and this many where it is

@@ -87,8 +87,9 @@ class FitOptions:
     robust: Robust = "none"  # down-weight stretches with bumps (huber) or collisions (bisquare)
     control_period: float = 0.0  # the drives hold each torque this long (ZOH) [s]
     encoder_counts: int | None = None  # correct for the encoders' errors in A (counts/rev)
-    # fold the shift to a second recipe into σ (crosscheck); "auto": when the logs have at
-    # most crosscheck.AUTO_MAX_SAMPLES samples (its reference formed in the fit's own pass)
+    # fold the shift to a second recipe into σ (crosscheck; its reference formed in the fit's
+    # own pass); "auto": over all samples of logs of at most crosscheck.AUTO_MAX_SAMPLES, over
+    # the first ones of longer logs (crosscheck.reference_budget)
     recipe_check: bool | Literal["auto"] = "auto"
 
     def __post_init__(self) -> None:

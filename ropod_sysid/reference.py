@@ -154,8 +154,7 @@ class ReferenceTee:
         ref = self.ref
         assert ref is not None
         try:
-            self.cut = ref.finish()[0], (ref.bracket if ref.bracket is not None
-                                         else float(ref.delay))
+            self.cut = _finished(ref)
         except InputError:
             self.past = True
             self.drop()
@@ -170,13 +169,11 @@ class ReferenceTee:
             return self.cut
         if self.ref is None:
             return None
-        ref = self.ref
         try:
-            tri = ref.finish()[0]
+            return _finished(self.ref)
         except InputError:
             self.drop()
             return None
-        return tri, (ref.bracket if ref.bracket is not None else float(ref.delay))
 
     def refund(self) -> None:
         """Give the budget back what it held before this piece (it will be passed again)."""
@@ -189,3 +186,8 @@ class ReferenceTee:
     def close(self) -> None:
         if self.ref is not None:
             self.ref.close()
+
+
+def _finished(ref: _Blocks) -> tuple[Triangles, float | DelayBracket]:
+    """The reference's triangles of the samples it has, and what its b_ID was formed at."""
+    return ref.finish()[0], (ref.bracket if ref.bracket is not None else float(ref.delay))
