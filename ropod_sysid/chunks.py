@@ -109,37 +109,78 @@ def iter_chunks(source: Source, platform: Platform, chunk: int = DEFAULT_CHUNK,
 
 # the longest a CSV field of a float64 takes, with its comma: "-2.2250738585072014e-308,"
 CSV_FIELD_BYTES = 25
+CSV_SAMPLE_BYTES = 1 << 16  # read at a few places to estimate a CSV log's rows
 
 
-def fewest_samples(source: Source) -> int:
-    """A lower bound of a log's samples that costs no reading: for a CSV log (also
-    ``.csv.gz``, by the size gzip records) its bytes over the longest row its header's fields
-    can make (:data:`CSV_FIELD_BYTES` each); 0 for other sources, or when unsure. (The recipe
-    check, :mod:`ropod_sysid.crosscheck`, leaves a log out of the fit's pass when it is surely
-    too long for ``fit``'s default check.)"""
-    if isinstance(source, Log):
-        return source.n_samples
-    path = Path(source)
+def _csv_head(path: Path) -> tuple[int, bytes, bytes] | None:
+    """A CSV log's data bytes (a ``.csv.gz`` log's by the size gzip records: the last
+    member's, mod 2³²), its header line and the first bytes after it; None for other
+    sources or when unreadable."""
     name = path.name.lower()
     try:
         if name.endswith(".csv"):
             size = path.stat().st_size
             with path.open("rb") as f:
                 header = f.readline(1 << 16)
+                head = f.read(CSV_SAMPLE_BYTES)
         elif name.endswith(".csv.gz"):
             import gzip
 
-            with path.open("rb") as f:  # the last member's size mod 2³²: a bound of one member
+            with path.open("rb") as f:
                 f.seek(-4, 2)
                 size = int.from_bytes(f.read(4), "little")
             with gzip.open(path, "rb") as g:
                 header = g.readline(1 << 16)
+                head = g.read(4 * CSV_SAMPLE_BYTES)  # (no seeking: more of its head)
         else:
-            return 0
+            return None
     except (OSError, EOFError, ValueError):
+        return None
+    return max(0, size - len(header)), header, head
+
+
+def fewest_samples(source: Source) -> int:
+    """A lower bound of a log's samples that costs no reading: for a CSV log (also
+    ``.csv.gz``, by the size gzip records) its bytes over the longest row its header's fields
+    can make (:data:`CSV_FIELD_BYTES` each); 0 for other sources, or when unsure. (The recipe
+    check, :mod:`ropod_sysid.crosscheck`, forms its reference on a part of a log that is
+    surely too long for ``fit``'s default check.)"""
+    if isinstance(source, Log):
+        return source.n_samples
+    got = _csv_head(Path(source))
+    if got is None:
         return 0
-    fields = header.count(b",") + 1
-    return max(0, (size - len(header)) // (CSV_FIELD_BYTES * fields + 1))
+    size, header, _ = got
+    return size // (CSV_FIELD_BYTES * (header.count(b",") + 1) + 1)
+
+
+def estimated_samples(source: Source) -> int:
+    """A log's samples as near as a few reads tell (its length for an in-memory log): a CSV
+    log's data bytes over its rows' length, measured on :data:`CSV_SAMPLE_BYTES` after
+    the header and, in a plain ``.csv``, the median of that and as many at the middle and at
+    the end (a log's first rows, at rest, are short); 0 for other sources, or when unsure.
+    Where the recipe check's reference windows go in a long log
+    (:func:`ropod_sysid.crosscheck.reference_windows`)."""
+    if isinstance(source, Log):
+        return source.n_samples
+    path = Path(source)
+    got = _csv_head(path)
+    if got is None:
+        return 0
+    size, header, head = got
+    blocks = [head]
+    if path.name.lower().endswith(".csv") and size > 3 * CSV_SAMPLE_BYTES:
+        try:
+            with path.open("rb") as f:
+                for at in (len(header) + size // 2, len(header) + size - CSV_SAMPLE_BYTES):
+                    f.seek(at)
+                    blocks.append(f.read(CSV_SAMPLE_BYTES))
+        except OSError:
+            pass
+    lengths = sorted(len(b) / b.count(b"\n") for b in blocks if b.count(b"\n"))
+    if not lengths:
+        return fewest_samples(path)
+    return max(fewest_samples(path), round(size / lengths[len(lengths) // 2]))
 
 
 def source_name(source: Source) -> str:

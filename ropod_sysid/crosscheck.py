@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 
@@ -57,20 +57,30 @@ if TYPE_CHECKING:
     from ropod_sysid.io.log import Log
     from ropod_sysid.solve import Solution
 
+    # the recipe check's fits of part of the logs under the reference's options: the fit's
+    # recipe, the reference's, and whether the part is windows spread over the logs (else
+    # their first samples); None where they were not formed
+    Part: TypeAlias = Callable[[FitOptions], tuple[FitResult, FitResult, bool] | None]
+
 # With ``recipe_check="auto"`` (``fit``'s default) the check runs on logs of at most this many
 # samples in all: the shipped sample (24,000), up to 16 minutes at 1 kHz. Its reference is
 # formed in the fit's own pass over the logs (:func:`ropod_sysid.stream.piece_triangles_checked`),
 # which it lengthens by 0.3-0.8 s up to here (a 10-minute 1 kHz CSV log 1.1-1.3 -> 2.0-2.1 s).
 # Longer logs are checked on their first samples (below); ``--recipe-check``: on all of them.
 AUTO_MAX_SAMPLES = 1_000_000
-# On longer logs the automatic check measures the shift on the fit's first samples: as many as
-# AUTO_MAX_SAMPLES where the length is found while reading (MCAP), and this many where it is
-# known beforehand (a CSV log surely longer, :func:`ropod_sysid.chunks.fewest_samples`; an
-# in-memory log). The shift is a property of the recipe on the run, not of the amount of data:
-# measured on twenty joined copies of a noisy 60 s 1 kHz run (1.2 million samples), the shift
-# over its first 100,000 to 1,000,000 samples was 0.99-1.04 times (median over the values)
-# that over all of it, and gave the same share of the values within 2σ (97 %).
+# On longer logs the automatic check measures the shift on part of the logs: where their
+# length is known beforehand (CSV logs surely longer, :func:`ropod_sysid.chunks.fewest_samples`,
+# placed by :func:`ropod_sysid.chunks.estimated_samples`; in-memory logs) this many samples in
+# REFERENCE_WINDOWS windows spread over them (:func:`reference_windows`), else (MCAP, whose
+# length is found while reading) the first AUTO_MAX_SAMPLES. The shift is a property of the
+# recipe on the run, not of the amount of data: on twenty joined copies of a noisy 60 s 1 kHz
+# run (1.2 million samples) the shift over its first 100,000 to 1,000,000 samples was
+# 0.99-1.04 times (median over the values) that over all of it, with the same share of the
+# values within 2σ (97 %). But a log's first minutes need not be like the rest: 20 minutes at
+# 1 kHz whose first 4 drive gently kept 72 % of the values within 2σ with the shift of the
+# first 200,000 samples, 100 % with it over four windows (97 % over all samples).
 PREFIX_SAMPLES = 200_000
+REFERENCE_WINDOWS = 4
 
 
 def reference_budget(mode: bool | str, fewest: int) -> int | None:
@@ -137,14 +147,14 @@ def folded(sol: Solution, shift: np.ndarray, reference: str) -> Solution:
 
 
 def fold_shift(result: FitResult, reference: FitResult,
-               base: FitResult | None = None) -> FitResult:
+               base: FitResult | None = None, spread: bool = False) -> FitResult:
     """``result`` with the recipe shift Δ = values − reference values folded into σ (the
     shown solution's: the bounded one with ``--physical``), and recorded
     (:attr:`FitResult.recipe_shift`). Values the two fits determine differently (one a
     combination, the other not) get no shift: they are not the same quantity. ``base``: the
-    fit of the samples the reference was fitted to, when those are only the logs' first
-    (:func:`checked`): Δ = its values − the reference's, for the values ``result``
-    determines as ``base`` does."""
+    fit of the samples the reference was fitted to, when those are only part of the logs
+    (:func:`checked`; ``spread``: see :func:`part_text`): Δ = its values − the reference's,
+    for the values ``result`` determines as ``base`` does."""
     mine, theirs = (base or result).shown, reference.shown
     same = (mine.combination == theirs.combination) & (result.shown.combination
                                                        == mine.combination)
@@ -152,7 +162,7 @@ def fold_shift(result: FitResult, reference: FitResult,
     shift[[mine.names.index(k) for k in mine.fixed]] = 0.0
     text = describe(reference.options)
     if base is not None:
-        text += f" on the logs' first {base.samples:,} samples"
+        text += f" on {part_text(base, spread)}"
     out = dataclasses.replace(result, recipe_shift=dict(zip(mine.names, map(float, shift),
                                                             strict=True)),
                               recipe_reference=text)
@@ -193,39 +203,82 @@ def skipped_note(samples: int) -> str:
             "--recipe-check to include it (1.4-1.8 times the fit's time)")
 
 
-def prefix_note(checked_samples: int, samples: int) -> str:
-    """The note of a fit whose recipe shift was measured on its logs' first samples."""
-    return (f"recipe check on the logs' first {checked_samples:,} of {samples:,} samples "
-            f"(fit checks all of them by default up to {AUTO_MAX_SAMPLES:,}): σ includes the "
-            "shift between the two recipes measured there, the recipe's bias, which more data "
-            "do not shrink; add --recipe-check to measure it on all of them (1.4-1.8 times "
-            "the fit's time)")
+def part_text(base: FitResult, spread: bool) -> str:
+    """Which of the logs' samples the recipe shift was measured on: ``base`` is the fit's
+    recipe on them, a log per window (``spread``, :func:`reference_windows`), or on the first
+    samples of logs whose length was not known beforehand."""
+    if spread:
+        return (f"{base.samples:,} samples in {len(base.logs)} windows spread over the "
+                "logs")
+    return f"the logs' first {base.samples:,} samples"
 
 
-def first_samples(logs: Sequence[Log], budget: int | None) -> list[Log]:
-    """The logs' first ``budget`` samples in all (None: all), as the logs of a fit draw on
-    the reference's budget (:class:`ropod_sysid.reference.ReferenceBudget`)."""
+def part_note(base: FitResult, samples: int, spread: bool) -> str:
+    """The note of a fit whose recipe shift was measured on part of its logs' ``samples``
+    (:func:`part_text`)."""
+    where = (f"{base.samples:,} of the logs' {samples:,} samples, in {len(base.logs)} windows "
+             "spread over them" if spread else
+             f"the logs' first {base.samples:,} of {samples:,} samples")
+    return (f"recipe check on {where} (fit checks all of them by default up to "
+            f"{AUTO_MAX_SAMPLES:,}): σ includes the shift between the two recipes measured "
+            "there, the recipe's bias, which more data do not shrink; add --recipe-check to "
+            "measure it on all of them (1.4-1.8 times the fit's time)")
+
+
+def reference_windows(lengths: Sequence[int], budget: int,
+                      count: int = REFERENCE_WINDOWS) -> list[list[tuple[int, int]]]:
+    """Where the recipe check's reference goes in logs of ``lengths`` samples (in the fit's
+    order) over its ``budget``: ``count`` windows of ``budget // count`` samples, centred at
+    about (i + ½)/``count`` of their samples in all, as (start, stop) samples of each log; a
+    window across two logs is split, and a part under a quarter of a window left out. All of
+    each log when they fit the budget. Windows start on a multiple of 2,520 samples (60 for
+    windows shorter than that), which every row step up to 10 divides: the rows of a window
+    fitted as a log of its own are the whole log's (at 200 Hz, rows every 2nd sample at the
+    odd ones moved m_b by 3.7 % on simulated runs: docs/accuracy.md, "Stops and restarts")."""
+    total = sum(lengths)
+    if total <= budget:
+        return [[(0, n)] for n in lengths]
+    each = budget // count
+    align = 2520 if each >= 2520 else 60
+    starts = np.cumsum([0, *lengths])
+    out: list[list[tuple[int, int]]] = [[] for _ in lengths]
+    stop = 0
+    for i in range(count):
+        a = max(round((i + 0.5) * total / count - each / 2), 0) // align * align
+        a = max(a, -(-stop // align) * align)
+        if a + each > total:  # (pushed past the end by the one before)
+            a = (total - each) // align * align
+            if a < stop:
+                break
+        stop = a + each
+        for j, n in enumerate(lengths):
+            lo, hi = max(a, int(starts[j])), min(stop, int(starts[j]) + n)
+            if hi - lo >= max(each // 4, 1):
+                out[j].append((lo - int(starts[j]), hi - int(starts[j])))
+    return out
+
+
+def window_samples(logs: Sequence[Log], budget: int | None) -> list[Log]:
+    """The in-memory logs' samples the reference is formed on (:func:`reference_windows`;
+    None: all), each window a log of its own, as the fit's pass over log files forms them
+    (:class:`ropod_sysid.reference.ReferenceBudget`)."""
     if budget is None:
         return list(logs)
-    out: list[Log] = []
-    for log in logs:
-        if budget <= 0:
-            break
-        out.append(log if log.n_samples <= budget else log.slice(0, budget))
-        budget -= log.n_samples
-    return out
+    plan = reference_windows([log.n_samples for log in logs], budget)
+    return [log if (a, b) == (0, log.n_samples) else log.slice(a, b)
+            for log, windows in zip(logs, plan, strict=True) for a, b in windows]
 
 
 def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
             say: Callable[[str], None],
-            prefix: Callable[[FitOptions], tuple[FitResult, FitResult] | None] | None = None,
-            ) -> FitResult:
+            prefix: Part | None = None) -> FitResult:
     """The fit ``result`` with the recipe check (:attr:`ropod_sysid.fit.FitOptions.recipe_check`)
     when :func:`wanted`: the reference fit by ``refit`` (``fit_logs`` or ``fit_files`` of the
     same logs) under :func:`reference_options`, folded in (:func:`fold_shift`). With
     ``"auto"`` on longer logs, ``prefix(reference options)`` gives the fit's recipe and the
-    reference's on the logs' first samples (:func:`reference_budget`), whose shift is folded
-    into ``result``'s σ, with a note; where it gives None, ``result`` itself with a note that
+    reference's on part of the logs (:func:`reference_budget`: windows spread over them, or
+    their first samples; :data:`Part`), whose shift is folded into ``result``'s σ, with a
+    note; where it gives None, ``result`` itself with a note that
     the check was left out. With ``"auto"``, a reference recipe that cannot be fitted (an
     :class:`InputError`, e.g. logs too short for its span) leaves σ as it is, with a note
     saying why."""
@@ -247,25 +300,24 @@ def checked(result: FitResult, refit: Callable[[FitOptions], FitResult],
     return fold_shift(result, reference)
 
 
-def _checked_first(result: FitResult,
-                   prefix: Callable[[FitOptions], tuple[FitResult, FitResult] | None] | None,
+def _checked_first(result: FitResult, prefix: Part | None,
                    say: Callable[[str], None]) -> FitResult:
-    """:func:`checked` of logs over :data:`AUTO_MAX_SAMPLES`: the shift measured on their
-    first samples."""
+    """:func:`checked` of logs over :data:`AUTO_MAX_SAMPLES`: the shift measured on part of
+    them."""
     options = reference_options(result.options, log_step(result))
     got = None
     if prefix is not None:
-        say("reference fit (recipe check, on the logs' first samples)")
+        say("reference fit (recipe check, on part of the logs)")
         try:
             got = prefix(options)
         except InputError as exc:
-            result.logs[0].notes.append(f"recipe check left out: its fits of the logs' first "
-                                        f"samples ({describe(options)}) failed: {exc}")
+            result.logs[0].notes.append(f"recipe check left out: its fits of part of the "
+                                        f"logs ({describe(options)}) failed: {exc}")
             return result
     if got is None:
         result.logs[0].notes.append(skipped_note(result.samples))
         return result
-    base, reference = got
-    out = fold_shift(result, reference, base)
-    out.logs[0].notes.append(prefix_note(base.samples, result.samples))
+    base, reference, spread = got
+    out = fold_shift(result, reference, base, spread)
+    out.logs[0].notes.append(part_note(base, result.samples, spread))
     return out

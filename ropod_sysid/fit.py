@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
-from ropod_sysid.crosscheck import checked, first_samples, reference_budget
+from ropod_sysid.crosscheck import checked, reference_budget, window_samples
 from ropod_sysid.errors import InputError
 from ropod_sysid.io import check_distinct
 from ropod_sysid.io.log import Log
@@ -490,11 +490,11 @@ def fit_logs(logs: Sequence[Log], platform: Platform, options: FitOptions | None
                         pre.notes + ([note] if note else []), None))
         return out
 
-    def prefix(reference: FitOptions) -> tuple[FitResult, FitResult]:
+    def prefix(reference: FitOptions) -> tuple[FitResult, FitResult, bool]:
         budget = reference_budget("auto", sum(log.n_samples for log in logs))
-        cut = first_samples(logs, budget)
+        cut = window_samples(logs, budget)
         return (fit_logs(cut, platform, dataclasses.replace(options, recipe_check=False)),
-                fit_logs(cut, platform, reference))
+                fit_logs(cut, platform, reference), True)
 
     return checked(_fit(reduce, platform, options),
                    lambda ref: fit_logs(logs, platform, ref, progress), say, prefix)
@@ -541,12 +541,13 @@ def fit_files(paths: Sequence[str | Path], platform: Platform,
 
 
 def formed_prefix(formed: Sequence[Reference | None], platform: Platform, options: FitOptions,
-                  reference: FitOptions) -> tuple[FitResult, FitResult] | None:
+                  reference: FitOptions) -> tuple[FitResult, FitResult, bool] | None:
     """The recipe check of logs longer than its budget (:func:`ropod_sysid.crosscheck.checked`):
     the fit under ``options`` and the reference fit under ``reference``, both of the samples
     the reference was formed on in the fit's pass (:attr:`Reference.main`,
-    :attr:`Reference.pieces`); None where it was not formed for every log, or at another
-    span or delay than ``reference`` asks."""
+    :attr:`Reference.pieces`), and whether those are windows spread over the logs; None
+    where it was not formed for every log, or at another span or delay than ``reference``
+    asks."""
     if not formed or any(r is None for r in formed):
         return None
     refs = [r for r in formed if r is not None and r.pieces]
@@ -557,7 +558,8 @@ def formed_prefix(formed: Sequence[Reference | None], platform: Platform, option
     pieces = [piece for r in refs for piece in r.pieces]
     plain = dataclasses.replace(options, recipe_check=False)
     return (_fit(lambda _delay, _plot: main, platform, plain),
-            _fit(lambda _delay, _plot: pieces, platform, reference))
+            _fit(lambda _delay, _plot: pieces, platform, reference),
+            any(r.spread for r in refs))
 
 
 def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
@@ -568,7 +570,7 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
     fit's own pass also forms the check's reference of each log (unless
     ``options.recipe_check`` is False) and puts it there; filled, the reference fit takes its
     logs from it where they match its recipe, instead of reading them again."""
-    from ropod_sysid.chunks import fewest_samples
+    from ropod_sysid.chunks import estimated_samples, fewest_samples
     from ropod_sysid.distributed import pool
     from ropod_sysid.reference import ReferenceBudget
     from ropod_sysid.stream import DEFAULT_CHUNK, piece_triangles, piece_triangles_checked
@@ -592,8 +594,9 @@ def _fit_paths(paths: list[str], platform: Platform, options: FitOptions,
                    f" (input delay {1000 * delay:.2f} ms)" if delay else ""))
             if beside and not formed:
                 # serially the logs share one budget (on Dask each log has a copy)
-                budget = ReferenceBudget(reference_budget(
-                    options.recipe_check, sum(fewest_samples(p) for p in paths)))
+                budget = ReferenceBudget.for_logs(
+                    options.recipe_check, paths, [fewest_samples(p) for p in paths],
+                    estimated_samples)
                 both = run(piece_triangles_checked, paths, platform=platform, check=options,
                            input_delay=delay, chunk=size, plot=plot and plots, budget=budget)
                 formed.extend(ref for _, ref in both)

@@ -14,6 +14,7 @@ when it still runs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -33,31 +34,32 @@ __all__ = ["PieceReference", "Reference", "ReferenceBudget", "ReferenceTee"]
 @dataclass(frozen=True)
 class PieceReference:
     """The reference of one piece of a log (a log without gaps is one piece), from its
-    :class:`ReferenceTee`: the reference recipe's span, delay and triangles (``result``;
-    None with the span and delay when the budget was spent before the piece), and where the
-    budget ended inside the piece the fit's own triangles of the rows up to the same sample
-    (``main``; None: the piece's own)."""
+    :class:`ReferenceTee`: the reference recipe's span and delay, and for each window of the
+    piece its triangles (a :class:`StreamResult`) with the fit's own triangles of the rows
+    over the same samples (None: the piece's own, the window being all of it). No windows
+    (and span and delay None) where the budget had none in the piece."""
 
     span: Span | None
     delay: float | DelayBracket | None
-    result: StreamResult | None
-    main: Triangles | None = None
+    windows: list[tuple[StreamResult, Triangles | None]]
+    spread: bool = False  # a window starts after the piece's first sample
 
 
 @dataclass(frozen=True)
 class Reference:
-    """The recipe check's reference pieces of a log, formed in the fit's own pass
+    """The recipe check's reference of a log, formed in the fit's own pass
     (:func:`ropod_sysid.stream.piece_triangles_checked`): the reference recipe's span and what
     its b_ID was formed at (a delay, or the search's bracket), as
-    :func:`ropod_sysid.crosscheck.reference_options` gave them for the log's sample time."""
+    :func:`ropod_sysid.crosscheck.reference_options` gave them for the log's sample time, and
+    a piece of the reference for each of its windows."""
 
-    span: Span | None  # (None: no piece of the log within the budget)
+    span: Span | None  # (None: no window in the log)
     delay: float | DelayBracket | None
     pieces: list[tuple[str, Triangles, list[str], LogPlot | None]]
-    # the fit's own pieces over the reference's samples (the rows up to the cut in a piece the
-    # budget ended in; none of the pieces past it)
+    # the fit's own triangles over the same samples, window for window
     main: list[tuple[str, Triangles, list[str], LogPlot | None]]
-    partial: bool = False  # the budget ended inside the log, or before it
+    partial: bool = False  # the windows leave out some of the log
+    spread: bool = False  # they are spread over it (ReferenceBudget.windows), not its first
 
     @staticmethod
     def of_pieces(pieces: list[tuple[str, Triangles, list[str], LogPlot | None]],
@@ -67,8 +69,10 @@ class Reference:
         if any(ref is None for ref in refs):
             return None
         got = [(piece, ref) for piece, ref in zip(pieces, refs, strict=True)
-               if ref is not None and ref.result is not None]
-        partial = len(got) < len(refs) or any(ref.main is not None for _, ref in got)
+               if ref is not None and ref.windows]
+        partial = (len(got) < len(refs)
+                   or any(len(ref.windows) > 1 or ref.windows[0][1] is not None
+                          for _, ref in got))
         if not got:
             return Reference(None, None, [], [], partial)
         span, delay = got[0][1].span, got[0][1].delay
@@ -76,104 +80,166 @@ class Reference:
             return None
         return Reference(
             span, delay,
-            [(r.source, r.triangles, r.notes, r.plot) for _, ref in got
-             if (r := ref.result) is not None],
-            [(name, tri if ref.main is None else ref.main, [], None)
-             for (name, tri, _, _), ref in got], partial)
+            [(r.source, r.triangles, r.notes, r.plot) for _, ref in got for r, _ in ref.windows],
+            [(name, tri if main is None else main, [], None)
+             for (name, tri, _, _), ref in got for _, main in ref.windows], partial,
+            any(ref.spread for _, ref in got))
 
 
 @dataclass
 class ReferenceBudget:
-    """Samples the recipe check's reference may still be formed for, over the logs of one fit
-    (``fit``'s automatic check: :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` in all; None,
-    ``--recipe-check``: no limit). Serially every log draws on the same budget; on Dask workers
-    each log has a copy, so a log alone is bounded."""
+    """Where the recipe check's reference is formed, over the logs of one fit (``fit``'s
+    automatic check, :func:`ropod_sysid.crosscheck.reference_budget`): ``windows`` planned by
+    log name (:func:`ropod_sysid.crosscheck.reference_windows`, samples of each log), or
+    without them the first ``left`` samples (None, ``--recipe-check``: all), which serially
+    every log draws on. On Dask workers each log has a copy: a log alone is bounded."""
 
     left: int | None
+    windows: dict[str, list[tuple[int, int]]] | None = None
 
-    def take(self, n: int) -> int:
-        """Draw ``n`` samples: how many were left of them (all but where the budget ends)."""
+    @classmethod
+    def for_logs(cls, mode: bool | str, names: list[str], fewest: list[int],
+                 estimated: Callable[[str], int]) -> ReferenceBudget:
+        """The budget of logs ``names`` of at least ``fewest`` samples each
+        (:func:`ropod_sysid.chunks.fewest_samples`), whose lengths ``estimated`` gives
+        (:func:`ropod_sysid.chunks.estimated_samples`) when they are surely over it."""
+        from ropod_sysid import crosscheck
+
+        budget = crosscheck.reference_budget(mode, sum(fewest))
+        if budget is None or sum(fewest) <= crosscheck.AUTO_MAX_SAMPLES:
+            return cls(budget)
+        plan = crosscheck.reference_windows([estimated(n) for n in names], budget)
+        return cls(budget, dict(zip(names, plan, strict=True)))
+
+    def of_piece(self, name: str, first: int) -> list[tuple[int, float]]:
+        """The windows of the piece of log ``name`` from its sample ``first`` on, in the
+        piece's samples (a window's stop may lie past the piece's end)."""
+        if self.windows is not None:
+            return [(max(a - first, 0), b - first) for a, b in self.windows.get(name, [])
+                    if b > first]
         if self.left is None:
-            return n
-        got = min(n, self.left)
-        self.left -= got
-        return got
+            return [(0, math.inf)]
+        return [(0, self.left)] if self.left > 0 else []
 
-    @property
-    def spent(self) -> bool:
-        return self.left is not None and self.left <= 0
+    def spend(self, n: int) -> None:
+        """``n`` samples were formed on (the first samples' budget)."""
+        if self.windows is None and self.left is not None:
+            self.left -= n
 
 
 class ReferenceTee:
     """The grid's sink of a pass that also forms the recipe check's reference triangles
     (:mod:`ropod_sysid.crosscheck`) from the same samples, so that the check needs no second
-    reading of the log. The reference's blocks are made once the sample time is known (its
-    span and delay bracket depend on it). Where the ``budget`` ends the reference is cut: its
-    triangles are finished there and the fit's rows up to the same sample kept apart
-    (:meth:`ropod_sysid.stream._Blocks.mark_rows`); a budget spent before the piece starts
-    forms none (:attr:`past`). An :class:`InputError` of the reference (a log too short for
-    its span) drops it, and the check then reads the log again (or is left out)."""
+    reading of the log. In each window of the ``budget`` in the piece the reference recipe's
+    blocks (made once the sample time is known: its span and delay bracket depend on it) take
+    the window's samples as a log of their own, and the fit's own blocks keep the triangles of
+    their rows over the same samples apart (:meth:`ropod_sysid.stream._Blocks.keep_rows`). An
+    :class:`InputError` of the reference (a window too short for its span) leaves the window
+    out; at the piece's start (the log too short for its span) it drops the reference, and
+    the check then reads the log again (or is left out)."""
 
     def __init__(self, blocks: _Blocks, make: Callable[[float], _Blocks],
-                 budget: ReferenceBudget) -> None:
+                 budget: ReferenceBudget, name: str = "", first: int = 0) -> None:
         self.blocks = blocks
         self.make = make
         self.budget = budget
         self.before = budget.left  # (refund)
-        self.ref: _Blocks | None = None
-        self.past = False  # the budget was spent before this piece
-        self.cut: tuple[Triangles, float | DelayBracket] | None = None
+        self.windows = budget.of_piece(name, first)
+        self.dropped = False
+        self.at = 0  # samples pushed
+        self.next = 0  # the next window
+        self.ref: _Blocks | None = None  # the open window's blocks
+        self.open: tuple[int, float, int] = (0, 0.0, 0)  # its start, stop and kept rows' index
+        self.done: list[tuple[StreamResult, int, bool]] = []  # window, kept rows, whole piece
+        self.spread = False  # a window opened after the piece's first sample
+        self.span: Span | None = None
+        self.delay: float | DelayBracket | None = None
 
     def start(self, dt: float, jitter: float = 0.0) -> None:
+        self.dt, self.jitter = dt, jitter
         self.blocks.start(dt, jitter)
-        if self.budget.spent:
-            self.past = True
-            return
-        try:
-            self.ref = self.make(dt)
-            self.ref.start(dt, jitter)
-        except InputError:
-            self.drop()
 
     def push(self, samples: _Samples) -> None:
-        if self.ref is not None and self.cut is None:  # (first: the fit's rows not yet past
-            n = self.budget.take(len(samples))         # the cut)
+        n, i = len(samples), 0
+        while i < n and not self.dropped:
+            if self.ref is None:
+                if self.next >= len(self.windows) or self.windows[self.next][0] >= self.at + n:
+                    break
+                i = max(i, self.windows[self.next][0] - self.at)
+                self._open(self.at + i)
+                continue
+            start, stop, _ = self.open
+            j = int(min(n, stop - self.at))
             try:
-                self.ref.push(samples if n == len(samples) else samples.take(0, n))
+                self.ref.push(samples if (i, j) == (0, n) else samples.take(i, j))
             except InputError:
-                self.drop()
-            else:
-                if self.budget.spent:
-                    self._cut()
+                self.blocks.drop_kept(self.open[2])
+                self.close()
+                continue
+            self.budget.spend(j - i)
+            i = j
+            if self.at + i >= stop:
+                self._close()
+        self.at += n
         self.blocks.push(samples)
 
-    def _cut(self) -> None:
-        """The budget ends here: the reference's triangles of the samples it has, and the
-        fit's rows up to its last kept sample kept apart; too few samples for the reference
-        recipe's span, and the piece has none (:attr:`past`)."""
+    def _open(self, start: int) -> None:
+        """The window from the piece's sample ``start``: the reference's blocks, and the fit's
+        rows over its samples kept apart."""
+        stop = self.windows[self.next][1]
+        self.next += 1
+        try:
+            ref = self.make(self.dt)
+            ref.start(self.dt, self.jitter)
+        except InputError:
+            if start == 0:
+                self.drop()
+            return
+        self.span, self.delay = ref.span, (ref.bracket if ref.bracket is not None
+                                           else float(ref.delay))
+        index = self.blocks.keep_rows(start + ref.trim if start else None,
+                                      int(min(stop, 2**62)) - ref.trim)
+        self.ref, self.open = ref, (start, stop, index)
+        self.spread = self.spread or start > 0
+
+    def _close(self, whole: bool = False) -> None:
+        """The open window ends (``whole``: it is all of the piece): its triangles, or (too
+        short for the reference recipe's span) none, and the fit's rows over it not kept
+        either; a whole piece too short drops the reference."""
+        from ropod_sysid.stream import StreamResult
+
         ref = self.ref
         assert ref is not None
+        start, _, index = self.open
+        self.ref = None
         try:
-            self.cut = _finished(ref)
+            tri = ref.finish()[0]
         except InputError:
-            self.past = True
-            self.drop()
-            return
-        self.blocks.mark_rows(ref.avail - ref.trim)
-        ref.close()
-        ref.parts = []  # (its samples: not needed any more)
+            self.blocks.drop_kept(index)
+            if whole:
+                self.dropped = True
+        else:
+            self.done.append((StreamResult(ref.source, tri, [], ref.avail, ref.dt, ref.k),
+                              index, whole))
+        finally:
+            ref.close()
+            ref.parts = []  # (its samples: not needed any more)
 
-    def finish(self) -> tuple[Triangles, float | DelayBracket] | None:
-        """The reference's triangles and what its b_ID was formed at; None if dropped."""
-        if self.cut is not None:
-            return self.cut
-        if self.ref is None:
+    def finish(self) -> PieceReference | None:
+        """After the fit's blocks finished: the piece's reference (:class:`PieceReference`);
+        None if dropped."""
+        if self.dropped:
             return None
-        try:
-            return _finished(self.ref)
-        except InputError:
-            self.drop()
+        if self.ref is not None:  # the piece ends in the window
+            self._close(whole=self.open[0] == 0)
+        if self.dropped:
             return None
+        kept, dropped = self.blocks.kept, self.blocks.dropped
+        windows = [(res, None if whole else kept[index]) for res, index, whole in self.done
+                   if index not in dropped and (whole or kept[index] is not None)]
+        if not windows:
+            return PieceReference(None, None, [])
+        return PieceReference(self.span, self.delay, windows, self.spread)
 
     def refund(self) -> None:
         """Give the budget back what it held before this piece (it will be passed again)."""
@@ -181,13 +247,9 @@ class ReferenceTee:
 
     def drop(self) -> None:
         self.close()
-        self.ref = None
+        self.dropped = True
 
     def close(self) -> None:
         if self.ref is not None:
             self.ref.close()
-
-
-def _finished(ref: _Blocks) -> tuple[Triangles, float | DelayBracket]:
-    """The reference's triangles of the samples it has, and what its b_ID was formed at."""
-    return ref.finish()[0], (ref.bracket if ref.bracket is not None else float(ref.delay))
+            self.ref = None

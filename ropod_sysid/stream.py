@@ -62,6 +62,7 @@ from ropod_sysid.chunks import (
     DEFAULT_CHUNK,
     Source,
     _prefetch,
+    estimated_samples,
     fewest_samples,
     iter_chunks,
     single_thread_blas,
@@ -188,10 +189,12 @@ class _Blocks:
         self.odo: OdometryState | None = None
         self.jitter = 0.0  # half-width of the sample instants' jitter (start(): grid_jitter)
         self.obs = ObserverStats() if params is not None else None
-        # mark_rows: the kept sample up to which the rows' triangles are also kept apart
-        self.mark: int | None = None
-        self.marked: Triangles | None = None
-        self.snapped = False
+        # keep_rows: the kept samples [start, stop) whose rows' triangles are also kept apart
+        # (start None: from the first row), and their triangles (kept)
+        self.ranges: list[tuple[int | None, int]] = []
+        self.kept: list[Triangles | None] = []
+        self.closed: list[bool] = []
+        self.dropped: set[int] = set()  # ranges whose reference window was left out
         # the rows of block i are reduced in a worker thread while block i+1 is smoothed (numpy
         # releases the GIL in its loops); one worker keeps the merge order of the triangles
         self.worker = (ThreadPoolExecutor(1, thread_name_prefix="ropod-sysid-rows")
@@ -232,16 +235,18 @@ class _Blocks:
         self._wait(0)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
-        if self.mark is not None and not self.snapped:  # the piece ended before the mark
-            self._snapshot()
-        if self.marked is not None and self.marked is not self.tri:
-            assert self.mark is not None
-            self._finish_triangles(self.marked, self.mark + self.trim)
+        for index, (start, stop) in enumerate(self.ranges):
+            if not self.closed[index]:  # the piece ended in the range
+                self._close_range(index)
+            kept = self.kept[index]
+            if kept is not None and kept is not self.tri:
+                a = self.trim if start is None else start
+                self._finish_triangles(kept, min(stop, n - self.trim) - a + 2 * self.trim)
         self._finish_triangles(self.tri, n)
         return self.tri, self.obs, n
 
     def _finish_triangles(self, tri: Triangles, n: int) -> None:
-        """What the triangles of the rows of samples [0, n) carry besides the rows."""
+        """What the triangles of the rows of n samples carry besides the rows."""
         tri.samples = n - 2 * self.trim
         tri.duration = (n - 1) * self.dt
         tri.correlation = self.grid.correlation
@@ -249,22 +254,42 @@ class _Blocks:
             tri.delays = np.asarray(self.delay)  # (the bracket's node delays)
             tri.delay_order = self.bracket.order(self.dt)
 
-    def mark_rows(self, index: int) -> None:
-        """Keep the triangles of the rows before kept sample ``index`` apart
-        (:attr:`marked`, after :meth:`finish`): a block ends there (``index`` is taken up
-        to the row grid), or here if the rows already reach past it. The recipe check's
-        reference cut by its budget (:class:`ropod_sysid.reference.ReferenceTee`) is
-        compared with them."""
+    def keep_rows(self, start: int | None, stop: int) -> int:
+        """Keep the triangles of the rows of kept samples [``start``, ``stop``) apart (None:
+        from the first row; both taken up to the row grid) in :attr:`kept`, after
+        :meth:`finish`, at the index returned: blocks end there. Ranges come in order, each
+        ahead of the rows reduced so far. The recipe check's reference windows
+        (:class:`ropod_sysid.reference.ReferenceTee`) are compared with them."""
         step = self.grid.step
-        index = self.trim + max(0, -(-(index - self.trim) // step)) * step
-        self.mark = max(index, self.s)
-        if self.mark == self.s:
-            self._submit(self._snapshot)
 
-    def _snapshot(self) -> None:
-        """(In the rows' thread, after the blocks before the mark.)"""
-        self.marked = self.tri
-        self.snapped = True
+        def on_grid(index: int) -> int:
+            return self.trim + max(0, -(-(index - self.trim) // step)) * step
+
+        a = None if start is None else max(on_grid(start), self.s)
+        self.ranges.append((a, max(on_grid(stop), a or self.s)))
+        self.kept.append(None)
+        self.closed.append(False)
+        return len(self.ranges) - 1
+
+    def drop_kept(self, index: int) -> None:
+        """Keep the rows of range ``index`` no more (its reference window was left out)."""
+        self.dropped.add(index)
+        self._submit(self._close_range, index)
+
+    def _inside(self, s: int, e: int) -> int | None:
+        """The open range that rows of kept samples [s, e) lie in (not from the first row)."""
+        for index, (a, b) in enumerate(self.ranges):
+            if a is not None and a <= s and e <= b and index not in self.dropped:
+                return index
+        return None
+
+    def _close_range(self, index: int) -> None:
+        """(In the rows' thread, after the blocks of the range.)"""
+        if index in self.dropped:
+            self.kept[index] = None
+        elif not self.closed[index] and self.ranges[index][0] is None:
+            self.kept[index] = self.tri
+        self.closed[index] = True
 
     def close(self) -> None:
         """Stop the worker thread (also after an error: queued blocks are dropped)."""
@@ -288,7 +313,8 @@ class _Blocks:
         c = self.c
         while True:
             s = self.s
-            mark = self.mark if self.mark is not None and self.mark > s else None
+            mark = min((x for r in self.ranges for x in r if x is not None and x > s),
+                       default=None)
             if n is not None:
                 end = n - self.trim
                 if s >= end:
@@ -302,8 +328,9 @@ class _Blocks:
                 last = False
             self._reduce(s, e, last, n)
             self.s = e
-            if e == mark:
-                self._submit(self._snapshot)
+            for index, (_, b) in enumerate(self.ranges):
+                if b == e:
+                    self._submit(self._close_range, index)
             # keep what the next block reaches back to
             keep = max(0, min(e - self.halo - self.reach - c, e - self.halo - self.lookback))
             self._drop_before(keep)
@@ -358,11 +385,12 @@ class _Blocks:
                            self.source, k, dt, [], 0, self.grid, degree=degree,
                            jitter=self.jitter)
         self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)), pa, oa, ob,
-                     last)
+                     last, self._inside(s, e))
 
     def _rows(self, pre: Preprocessed, first: int, count: int, pa: int, oa: int, ob: int,
-              last: bool) -> None:
-        """The block's rows to its triangles, merged in order (and the observer's samples)."""
+              last: bool, keep: int | None = None) -> None:
+        """The block's rows to its triangles, merged in order (and the observer's samples);
+        also into the triangles of kept range ``keep``."""
         a, b = row_system(self.model, pre, first, count, self.friction)
         if self.gather is not None:
             rows = first + self.grid.step * np.arange(count)
@@ -373,6 +401,9 @@ class _Blocks:
         add_error_gram(block, self.model, pre, first + self.grid.step * np.arange(count),
                        self.friction, row0, self.encoder_counts, self.search_counts)
         self.tri = block if self.tri is None else self.tri.merge(block)
+        if keep is not None:
+            was = self.kept[keep]
+            self.kept[keep] = block if was is None else was.merge(block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
 
@@ -420,7 +451,7 @@ class _Run:
         self.detected: int | None = None  # the counts the first chunk's angles move by
         if check is not None and budget is not None:
             self.tee = ReferenceTee(blocks, lambda dt: self._reference_blocks(check, dt),
-                                    budget)
+                                    budget, name, first)
         self.grid = _Grid(name, resample, self.tee or blocks)
         self.notes: list[str] = []
         self.raw = 0  # samples read
@@ -441,24 +472,9 @@ class _Run:
     def reference(self) -> PieceReference | None:
         """The piece's reference (:class:`PieceReference`) after :meth:`finish`; None without
         one (no check asked, or dropped: an error of the reference recipe)."""
-        tee = self.tee
-        if tee is None:
+        if self.tee is None:
             return None
-        if tee.past:
-            return PieceReference(None, None, None)
-        ref = tee.ref
-        got = tee.finish()
-        if got is None or ref is None:
-            return None
-        tri, delay = got
-        main = None
-        if tee.cut is not None:
-            main = self.blocks.marked
-            if main is None:  # no row of the fit's before the cut
-                return PieceReference(None, None, None)
-        return PieceReference(ref.span, delay,
-                              StreamResult(self.blocks.source, tri, [], ref.avail, ref.dt,
-                                           ref.k), main)
+        return self.tee.finish()
 
     def close(self) -> None:
         self.blocks.close()
@@ -542,10 +558,10 @@ def _pass(source: Source, platform: Platform, span: Span, input_delay: float | D
         if run.name != name:
             res.triangles.label = run.name
             res.notes.insert(0, piece_note(run.name, name, run.first, run.raw, run.t0, run.t1))
-            if ref is not None and ref.result is not None:
-                ref.result.triangles.label = run.name
-                if ref.main is not None:
-                    ref.main.label = run.name
+            for window, main in [] if ref is None else ref.windows:
+                window.triangles.label = window.source = run.name
+                if main is not None:
+                    main.label = run.name
         done.append(res)
         if done_ref is not None:
             done_ref.append(ref)
@@ -602,8 +618,9 @@ def stream_pieces(source: Source, platform: Platform, span: Span | None = None,
     dropped: list[str] = []
     resample = False
     if check is not None and budget is None:  # the pieces of a log share one
-        budget = ReferenceBudget(crosscheck.reference_budget(check.recipe_check,
-                                                             fewest_samples(source)))
+        name = source_name(source)
+        budget = ReferenceBudget.for_logs(check.recipe_check, [name], [fewest_samples(source)],
+                                          lambda _: estimated_samples(source))
     with single_thread_blas():
         while True:
             try:

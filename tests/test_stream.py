@@ -146,8 +146,9 @@ def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypa
     res = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(recipe_check=True),
                                references=refs)
     (piece,) = refs
-    span, delay, ref = piece.span, piece.delay, piece.result
-    assert piece.main is None
+    span, delay = piece.span, piece.delay
+    ((ref, main),) = piece.windows
+    assert main is None and not piece.spread
     ref_options = crosscheck.reference_options(FitOptions(), res[0].dt)
     assert (span, delay) == (ref_options.span, ref_options.reduce_delay())
     alone = stream.stream_log(log, off_square, span=span, input_delay=delay, chunk=200)
@@ -158,20 +159,26 @@ def test_reference_beside_a_restarted_pass(off_square, runs_off_square, monkeypa
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) + 10)
     refs.clear()
     stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(), references=refs)
-    assert refs[0] is not None and refs[0].main is None
-    assert_same_triangles(alone.triangles, refs[0].result.triangles)
-    # past it the reference is cut, and the fit's rows up to the cut kept apart; the fit's
-    # own triangles are those of the pass without the check
+    ((whole, main),) = refs[0].windows
+    assert main is None
+    assert_same_triangles(alone.triangles, whole.triangles)
+    # past it the reference is formed on windows spread over the log, each a log of its own,
+    # and the fit's rows over each kept apart; the fit's own triangles are those of the pass
+    # without the check
     monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", len(log.t) - 1)
     refs.clear()
     over = stream.stream_pieces(log, off_square, chunk=200, check=FitOptions(),
                                 references=refs)
     (cut,) = refs
-    assert cut.result is not None and cut.main is not None
-    assert cut.result.samples == len(log.t) - 1  # (the budget, to the sample)
+    plan = crosscheck.reference_windows([len(log.t)], len(log.t) - 1)[0]
+    assert cut.spread and len(cut.windows) == len(plan) >= crosscheck.REFERENCE_WINDOWS - 1
     step = over[0].triangles.rows / over[0].triangles.samples
-    assert abs(cut.main.rows - step * cut.result.triangles.samples) <= 0.05 * cut.main.rows
-    assert cut.main.rows < over[0].triangles.rows
+    for (window, main), (a, b) in zip(cut.windows, plan, strict=True):
+        assert window.samples == b - a  # (the window, to the sample)
+        assert main is not None
+        assert abs(main.rows - step * window.triangles.samples) <= 0.1 * main.rows
+        assert window.triangles.duration == pytest.approx((b - a - 1) * res[0].dt)
+    assert sum(main.rows for _, main in cut.windows) < over[0].triangles.rows
     assert_same_triangles(res[0].triangles, over[0].triangles, rel=1e-9)
 
 
