@@ -92,10 +92,10 @@ def option_sets(rate: float, noisy: bool) -> dict[str, FitOptions]:
 def default_is(logs: list) -> str:
     """Which of the option sets ``fit``'s default equals on ``logs``: the check runs on logs of
     up to :data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples in all whole (on longer
-    ones on their first samples, which none of these option sets is)."""
+    ones on part of them, which none of these option sets is)."""
     samples = sum(len(lg.t) for lg in logs)
     return ("--recipe-check" if samples <= AUTO_MAX_SAMPLES else
-            "none of these (the check on the logs' first samples)")
+            "none of these (the check on part of the logs)")
 
 
 def main() -> None:

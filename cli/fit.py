@@ -20,7 +20,7 @@ from ropod_sysid.cli.common import (
     split_gaps_option,
     writes,
 )
-from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES, PREFIX_SAMPLES
+from ropod_sysid.crosscheck import AUTO_MAX_SAMPLES, PREFIX_SAMPLES, REFERENCE_WINDOWS
 from ropod_sysid.errors import InputError
 from ropod_sysid.fit import FitOptions, FitResult, WeightRotation, fit_files
 from ropod_sysid.inspect import motion_shortfall
@@ -200,9 +200,10 @@ def check_enough(result: FitResult, logs: tuple[str, ...]) -> None:
                    "66 %; docs/accuracy.md). The second recipe is formed in the same pass over "
                    "the logs: 1.4–1.8× the fit's time. Default: on for logs of up to "
                    f"{AUTO_MAX_SAMPLES:,} samples in all (the shipped sample: 24,000; 16 minutes "
-                   "at 1 kHz); on longer logs the shift is measured on their first samples "
-                   f"({PREFIX_SAMPLES:,} where the length is known beforehand, as for CSV), "
-                   "with a note.")
+                   "at 1 kHz); on longer logs the shift is measured on part of them, with a "
+                   f"note: {PREFIX_SAMPLES:,} samples in {REFERENCE_WINDOWS} windows spread over "
+                   "them where their length is known beforehand (CSV), else their first "
+                   f"{AUTO_MAX_SAMPLES:,}.")
 @click.option("--rcond", default=RCOND, show_default=True,
               help="Relative singular value below which a direction counts as unidentifiable.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,

@@ -1,6 +1,6 @@
 """The recipe check: fold the recipe's own bias into σ by fitting the logs a second way
-(``fit``'s default, on longer logs than :data:`AUTO_MAX_SAMPLES` samples measured on their
-first samples; ``--recipe-check``, ``--no-recipe-check``).
+(``fit``'s default, on longer logs than :data:`AUTO_MAX_SAMPLES` samples measured on part of
+them; ``--recipe-check``, ``--no-recipe-check``).
 
 σ (:func:`ropod_sysid.solve.jackknife_covariance`) is the spread of the values over the logs'
 stretches: it sees errors that vary from stretch to stretch and none that every stretch shares.
@@ -28,15 +28,18 @@ smoothing, rows and solves but no second reading; ``trajectory check`` predicts 
 a planned run (:mod:`ropod_sysid.trajectory.recipe_shift`).
 
 Longer logs. The bias is a property of the recipe on the run, which more data do not shrink,
-so the automatic check does not need all of a long log: past its budget
-(:func:`reference_budget`) the reference is cut in the fit's pass, the fit's own rows up to
-the same sample are kept apart (:meth:`ropod_sysid.stream._Blocks.mark_rows`), and Δ is the
-difference of the two recipes' fits of those first samples, folded into the whole fit's σ
-(:func:`checked`, with a note; in memory the same of the logs' first samples,
-:func:`first_samples`). Measured on twenty joined copies of a noisy 60 s 1 kHz run (1.2
-million samples): the jackknife's σ alone keep 79 % of the values within 2σ, the shift over
-all samples 97 %, over the first 200,000 97 % and over the first 1,000,000 (streamed from a
-CSV file too short for its length to be known beforehand) 100 %.
+so the automatic check does not need all of a long log, only a fair sample of it: over its
+budget (:func:`reference_budget`) the reference is formed in the fit's pass on windows spread
+over the logs (:func:`reference_windows`), each a log of its own, the fit's own rows over
+them kept apart (:meth:`ropod_sysid.stream._Blocks.keep_rows`), and Δ is the difference of
+the two recipes' fits of those windows, folded into the whole fit's σ (:func:`checked`, with
+a note; in memory the same, :func:`window_samples`). Where a log's length is not known
+before it is read (MCAP) the window is its first samples, cut where the budget ends.
+Measured on twenty joined copies of a noisy 60 s 1 kHz run (1.2 million samples): the
+jackknife's σ alone keep 79 % of the values within 2σ, the shift over all samples 97 %, over
+the first 200,000 97 % and over the first 1,000,000 (streamed from a CSV file too short for
+its length to be known beforehand) 100 %. On a log whose first minutes differ from the rest
+the first samples are no fair sample (below, :data:`PREFIX_SAMPLES`).
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ if TYPE_CHECKING:
 # samples in all: the shipped sample (24,000), up to 16 minutes at 1 kHz. Its reference is
 # formed in the fit's own pass over the logs (:func:`ropod_sysid.stream.piece_triangles_checked`),
 # which it lengthens by 0.3-0.8 s up to here (a 10-minute 1 kHz CSV log 1.1-1.3 -> 2.0-2.1 s).
-# Longer logs are checked on their first samples (below); ``--recipe-check``: on all of them.
+# Longer logs are checked on part of them (below); ``--recipe-check``: on all of them.
 AUTO_MAX_SAMPLES = 1_000_000
 # On longer logs the automatic check measures the shift on part of the logs: where their
 # length is known beforehand (CSV logs surely longer, :func:`ropod_sysid.chunks.fewest_samples`,

@@ -6,10 +6,10 @@ decoding a log is about half of a fit's work, so the second recipe's blocks
 (:class:`ropod_sysid.stream._Blocks`, at the reference's span and delay bracket) take the same
 grid samples as the fit's own, through :class:`ReferenceTee`, and the reference fit then solves
 from their triangles (:class:`Reference`). The automatic check runs on logs of up to
-:data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples in all, which the logs of one fit draw
-on (:class:`ReferenceBudget`); past it, or where the reference recipe does not fit a log (a
-piece too short for its span), the reference is dropped and the check reads the logs again
-when it still runs.
+:data:`ropod_sysid.crosscheck.AUTO_MAX_SAMPLES` samples in all; on longer ones on windows
+spread over them, or on their first samples where their length is not known beforehand
+(:class:`ReferenceBudget`). Where the reference recipe does not fit a log (a piece too short
+for its span) the reference is dropped and the check reads the logs again when it still runs.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from ropod_sysid.solve import Triangles
     from ropod_sysid.stream import StreamResult, _Blocks
 
-__all__ = ["PieceReference", "Reference", "ReferenceBudget", "ReferenceTee"]
+__all__ = ["KeptRows", "PieceReference", "Reference", "ReferenceBudget", "ReferenceTee"]
 
 
 @dataclass(frozen=True)
@@ -125,6 +125,48 @@ class ReferenceBudget:
         """``n`` samples were formed on (the first samples' budget)."""
         if self.windows is None and self.left is not None:
             self.left -= n
+
+
+class KeptRows:
+    """The fit's rows kept apart over the reference's windows
+    (:meth:`ropod_sysid.stream._Blocks.keep_rows`): ranges of kept samples [start, stop)
+    (start None: from the first row, whose triangles are the fit's own up to ``stop``), their
+    triangles, and which were closed or left out (their window was)."""
+
+    def __init__(self) -> None:
+        self.ranges: list[tuple[int | None, int]] = []
+        self.kept: list[Triangles | None] = []
+        self.closed: list[bool] = []
+        self.dropped: set[int] = set()
+
+    def add(self, start: int | None, stop: int) -> int:
+        self.ranges.append((start, stop))
+        self.kept.append(None)
+        self.closed.append(False)
+        return len(self.ranges) - 1
+
+    def next_edge(self, s: int) -> int | None:
+        """The first edge of a range after kept sample ``s`` (a block ends there)."""
+        return min((x for r in self.ranges for x in r if x is not None and x > s), default=None)
+
+    def inside(self, s: int, e: int) -> int | None:
+        """The range (not from the first row) that rows of kept samples [s, e) lie in."""
+        for index, (a, b) in enumerate(self.ranges):
+            if a is not None and a <= s and e <= b and index not in self.dropped:
+                return index
+        return None
+
+    def merge(self, index: int, block: Triangles) -> None:
+        was = self.kept[index]
+        self.kept[index] = block if was is None else was.merge(block)
+
+    def close(self, index: int, tri: Triangles | None) -> None:
+        """Range ``index`` ends, the fit's triangles being ``tri`` (once)."""
+        if index in self.dropped:
+            self.kept[index] = None
+        elif not self.closed[index] and self.ranges[index][0] is None:
+            self.kept[index] = tri
+        self.closed[index] = True
 
 
 class ReferenceTee:
@@ -234,7 +276,7 @@ class ReferenceTee:
             self._close(whole=self.open[0] == 0)
         if self.dropped:
             return None
-        kept, dropped = self.blocks.kept, self.blocks.dropped
+        kept, dropped = self.blocks.keep.kept, self.blocks.keep.dropped
         windows = [(res, None if whole else kept[index]) for res, index, whole in self.done
                    if index not in dropped and (whole or kept[index] is not None)]
         if not windows:

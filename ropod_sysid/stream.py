@@ -80,6 +80,7 @@ from ropod_sysid.platform import Platform
 from ropod_sysid.plotdata import LogPlot, PlotGather
 from ropod_sysid.recipe import delay_reach
 from ropod_sysid.reference import (
+    KeptRows,
     PieceReference,
     Reference,
     ReferenceBudget,
@@ -189,12 +190,7 @@ class _Blocks:
         self.odo: OdometryState | None = None
         self.jitter = 0.0  # half-width of the sample instants' jitter (start(): grid_jitter)
         self.obs = ObserverStats() if params is not None else None
-        # keep_rows: the kept samples [start, stop) whose rows' triangles are also kept apart
-        # (start None: from the first row), and their triangles (kept)
-        self.ranges: list[tuple[int | None, int]] = []
-        self.kept: list[Triangles | None] = []
-        self.closed: list[bool] = []
-        self.dropped: set[int] = set()  # ranges whose reference window was left out
+        self.keep = KeptRows()  # rows also kept apart (keep_rows)
         # the rows of block i are reduced in a worker thread while block i+1 is smoothed (numpy
         # releases the GIL in its loops); one worker keeps the merge order of the triangles
         self.worker = (ThreadPoolExecutor(1, thread_name_prefix="ropod-sysid-rows")
@@ -235,10 +231,9 @@ class _Blocks:
         self._wait(0)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
-        for index, (start, stop) in enumerate(self.ranges):
-            if not self.closed[index]:  # the piece ended in the range
-                self._close_range(index)
-            kept = self.kept[index]
+        for index, (start, stop) in enumerate(self.keep.ranges):
+            self.keep.close(index, self.tri)  # (where the piece ended in the range)
+            kept = self.keep.kept[index]
             if kept is not None and kept is not self.tri:
                 a = self.trim if start is None else start
                 self._finish_triangles(kept, min(stop, n - self.trim) - a + 2 * self.trim)
@@ -256,7 +251,7 @@ class _Blocks:
 
     def keep_rows(self, start: int | None, stop: int) -> int:
         """Keep the triangles of the rows of kept samples [``start``, ``stop``) apart (None:
-        from the first row; both taken up to the row grid) in :attr:`kept`, after
+        from the first row; both taken up to the row grid) in :attr:`KeptRows.kept`, after
         :meth:`finish`, at the index returned: blocks end there. Ranges come in order, each
         ahead of the rows reduced so far. The recipe check's reference windows
         (:class:`ropod_sysid.reference.ReferenceTee`) are compared with them."""
@@ -266,30 +261,16 @@ class _Blocks:
             return self.trim + max(0, -(-(index - self.trim) // step)) * step
 
         a = None if start is None else max(on_grid(start), self.s)
-        self.ranges.append((a, max(on_grid(stop), a or self.s)))
-        self.kept.append(None)
-        self.closed.append(False)
-        return len(self.ranges) - 1
+        return self.keep.add(a, max(on_grid(stop), a or self.s))
 
     def drop_kept(self, index: int) -> None:
         """Keep the rows of range ``index`` no more (its reference window was left out)."""
-        self.dropped.add(index)
+        self.keep.dropped.add(index)
         self._submit(self._close_range, index)
-
-    def _inside(self, s: int, e: int) -> int | None:
-        """The open range that rows of kept samples [s, e) lie in (not from the first row)."""
-        for index, (a, b) in enumerate(self.ranges):
-            if a is not None and a <= s and e <= b and index not in self.dropped:
-                return index
-        return None
 
     def _close_range(self, index: int) -> None:
         """(In the rows' thread, after the blocks of the range.)"""
-        if index in self.dropped:
-            self.kept[index] = None
-        elif not self.closed[index] and self.ranges[index][0] is None:
-            self.kept[index] = self.tri
-        self.closed[index] = True
+        self.keep.close(index, self.tri)
 
     def close(self) -> None:
         """Stop the worker thread (also after an error: queued blocks are dropped)."""
@@ -313,8 +294,7 @@ class _Blocks:
         c = self.c
         while True:
             s = self.s
-            mark = min((x for r in self.ranges for x in r if x is not None and x > s),
-                       default=None)
+            mark = self.keep.next_edge(s)
             if n is not None:
                 end = n - self.trim
                 if s >= end:
@@ -328,7 +308,7 @@ class _Blocks:
                 last = False
             self._reduce(s, e, last, n)
             self.s = e
-            for index, (_, b) in enumerate(self.ranges):
+            for index, (_, b) in enumerate(self.keep.ranges):
                 if b == e:
                     self._submit(self._close_range, index)
             # keep what the next block reaches back to
@@ -385,7 +365,7 @@ class _Blocks:
                            self.source, k, dt, [], 0, self.grid, degree=degree,
                            jitter=self.jitter)
         self._submit(self._rows, pre, s - pa, len(range(s, e, self.grid.step)), pa, oa, ob,
-                     last, self._inside(s, e))
+                     last, self.keep.inside(s, e))
 
     def _rows(self, pre: Preprocessed, first: int, count: int, pa: int, oa: int, ob: int,
               last: bool, keep: int | None = None) -> None:
@@ -402,8 +382,7 @@ class _Blocks:
                        self.friction, row0, self.encoder_counts, self.search_counts)
         self.tri = block if self.tri is None else self.tri.merge(block)
         if keep is not None:
-            was = self.kept[keep]
-            self.kept[keep] = block if was is None else was.merge(block)
+            self.keep.merge(keep, block)
         if self.obs is not None:
             self._observe(pre, pa, oa, ob, last)
 
