@@ -148,9 +148,11 @@ def fewest_samples(source: Source) -> int:
     if isinstance(source, Log):
         return source.n_samples
     got = _csv_head(Path(source))
-    if got is None:
-        return 0
-    size, header, _ = got
+    return 0 if got is None else _fewest(got[0], got[1])
+
+
+def _fewest(size: int, header: bytes) -> int:
+    """:func:`fewest_samples` of a CSV log's data bytes ``size`` under ``header``."""
     return size // (CSV_FIELD_BYTES * (header.count(b",") + 1) + 1)
 
 
@@ -178,9 +180,8 @@ def estimated_samples(source: Source) -> int:
         except OSError:
             pass
     lengths = sorted(len(b) / b.count(b"\n") for b in blocks if b.count(b"\n"))
-    if not lengths:
-        return fewest_samples(path)
-    return max(fewest_samples(path), round(size / lengths[len(lengths) // 2]))
+    fewest = _fewest(size, header)
+    return max(fewest, round(size / lengths[len(lengths) // 2])) if lengths else fewest
 
 
 def source_name(source: Source) -> str:

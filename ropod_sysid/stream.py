@@ -261,7 +261,10 @@ class _Blocks:
             return self.trim + max(0, -(-(index - self.trim) // step)) * step
 
         a = None if start is None else max(on_grid(start), self.s)
-        return self.keep.add(a, max(on_grid(stop), a or self.s))
+        index = self.keep.add(a, max(on_grid(stop), a or self.s))
+        if self.keep.ranges[index][1] == self.s:  # (the rows already reach it)
+            self._submit(self._close_range, index)
+        return index
 
     def drop_kept(self, index: int) -> None:
         """Keep the rows of range ``index`` no more (its reference window was left out)."""
