@@ -192,6 +192,7 @@ class ReferenceTee:
         self.next = 0  # the next window
         self.ref: _Blocks | None = None  # the open window's blocks
         self.open: tuple[int, float, int] = (0, 0.0, 0)  # its start, stop and kept rows' index
+        self.closing: list[tuple[_Blocks, int, bool]] = []  # windows ended, rows in reduction
         self.done: list[tuple[StreamResult, int, bool]] = []  # window, kept rows, whole piece
         self.spread = False  # a window opened after the piece's first sample
         self.span: Span | None = None
@@ -216,7 +217,8 @@ class ReferenceTee:
                 self.ref.push(samples if (i, j) == (0, n) else samples.take(i, j))
             except InputError:
                 self.blocks.drop_kept(self.open[2])
-                self.close()
+                self.ref.close()
+                self.ref = None
                 continue
             self.budget.spend(j - i)
             i = j
@@ -227,7 +229,8 @@ class ReferenceTee:
 
     def _open(self, start: int) -> None:
         """The window from the piece's sample ``start``: the reference's blocks, and the fit's
-        rows over its samples kept apart."""
+        rows over its samples kept apart; the window before it taken (long since reduced)."""
+        self._take()
         stop = self.windows[self.next][1]
         self.next += 1
         try:
@@ -245,27 +248,43 @@ class ReferenceTee:
         self.spread = self.spread or start > 0
 
     def _close(self, whole: bool = False) -> None:
-        """The open window ends (``whole``: it is all of the piece): its triangles, or (too
-        short for the reference recipe's span) none, and the fit's rows over it not kept
-        either; a whole piece too short drops the reference."""
-        from ropod_sysid.stream import StreamResult
-
+        """The open window ends (``whole``: it is all of the piece): its last samples reduced,
+        its triangles taken in :meth:`finish` (its rows' thread goes on beside the pass, which
+        waited for it here before: 0.7-1.2 s of a 60-minute log's fit); too short for the
+        reference recipe's span, none, and the fit's rows over it not kept either."""
         ref = self.ref
         assert ref is not None
-        start, _, index = self.open
+        _, _, index = self.open
         self.ref = None
         try:
-            tri = ref.finish()[0]
+            ref.flush()
         except InputError:
-            self.blocks.drop_kept(index)
-            if whole:
-                self.dropped = True
+            self._left_out(ref, index, whole)
         else:
-            self.done.append((StreamResult(ref.source, tri, [], ref.avail, ref.dt, ref.k),
-                              index, whole))
-        finally:
-            ref.close()
-            ref.parts = []  # (its samples: not needed any more)
+            self.closing.append((ref, index, whole))
+
+    def _left_out(self, ref: _Blocks, index: int, whole: bool) -> None:
+        """Window ``ref`` cannot be fitted by the reference recipe: the fit's rows over it are
+        not kept; a whole piece too short drops the reference."""
+        ref.close()
+        self.blocks.drop_kept(index)
+        if whole:
+            self.dropped = True
+
+    def _take(self) -> None:
+        """The closed windows' triangles (:meth:`_close`), once their rows are reduced."""
+        from ropod_sysid.stream import StreamResult
+
+        closing, self.closing = self.closing, []
+        for ref, index, whole in closing:
+            try:
+                tri = ref.finish()[0]
+            except InputError:
+                self._left_out(ref, index, whole)
+            else:
+                ref.close()
+                self.done.append((StreamResult(ref.source, tri, [], ref.avail, ref.dt, ref.k),
+                                  index, whole))
 
     def finish(self) -> PieceReference | None:
         """After the fit's blocks finished: the piece's reference (:class:`PieceReference`);
@@ -274,6 +293,7 @@ class ReferenceTee:
             return None
         if self.ref is not None:  # the piece ends in the window
             self._close(whole=self.open[0] == 0)
+        self._take()
         if self.dropped:
             return None
         kept, dropped = self.blocks.keep.kept, self.blocks.keep.dropped
@@ -295,3 +315,6 @@ class ReferenceTee:
         if self.ref is not None:
             self.ref.close()
             self.ref = None
+        for ref, _, _ in self.closing:
+            ref.close()
+        self.closing = []

@@ -184,6 +184,7 @@ class _Blocks:
         self.keep_series = keep_series
         self.gather = PlotGather() if plot else None
         self.parts: list[_Samples] = []
+        self.flushed = False  # the last samples reduced (flush)
         self.g0 = 0  # index of the first buffered sample
         self.avail = 0  # samples received
         self.tri: Triangles | None = None
@@ -224,10 +225,19 @@ class _Blocks:
             self.avail += len(samples)
             self._drain(None)
 
-    def finish(self) -> tuple[Triangles, ObserverStats | None, int]:
+    def flush(self) -> None:
+        """Reduce the last samples (their rows' thread may still be at work: :meth:`finish`
+        waits for it); the samples themselves are then released."""
         n = self.avail
         check_length(self.source, n, self.k, self.dt, self.trim)
         self._drain(n)
+        self.parts = []
+        self.flushed = True
+
+    def finish(self) -> tuple[Triangles, ObserverStats | None, int]:
+        n = self.avail
+        if not self.flushed:
+            self.flush()
         self._wait(0)
         if self.tri is None:  # pragma: no cover - excluded by the length check
             raise InputError(f"{self.source}: no samples left after trimming the smoother's ends")
