@@ -352,6 +352,30 @@ def test_reference_of_long_logs_formed_in_the_pass(tmp_path, monkeypatch, off_sq
         for n in (base.samples - 1, base.samples))  # (the rows' grid at the cut)
 
 
+def test_windows_too_short_for_the_reference_in_the_pass(tmp_path, monkeypatch, off_square,
+                                                         varied_run):
+    """Streamed windows too short for the reference recipe's span are each left out at their
+    end (their last samples reduced, :meth:`ropod_sysid.stream._Blocks.flush`), the fit's rows
+    over them not kept: σ stays the jackknife's, with the note that the check was left out."""
+    from ropod_sysid import reference
+    from ropod_sysid.chunks import fewest_samples
+
+    log = tmp_path / "run.csv"
+    write_csv_log(varied_run, log)
+    plain = fit_files([log], off_square, FitOptions(recipe_check=False))
+    left_out = _counting(monkeypatch, reference.ReferenceTee, "_left_out")
+    monkeypatch.setattr(crosscheck, "PREFIX_SAMPLES", 60)  # four windows of 15 samples
+    monkeypatch.setattr(crosscheck, "AUTO_MAX_SAMPLES", fewest_samples(log) - 1)
+    short = fit_files([log], off_square, chunk=1000)
+    assert len(left_out) == 4
+    assert short.recipe_shift is None
+    np.testing.assert_allclose(short.solution.std, plain.solution.std, rtol=1e-9)
+    np.testing.assert_allclose(short.solution.values, plain.solution.values, rtol=1e-9)
+    assert short.logs[0].notes[-1].startswith(
+        f"recipe check left out: the logs have {plain.samples:,} samples, more than the "
+        f"{fewest_samples(log) - 1:,} up to which fit runs it by default")
+
+
 def test_logs_of_one_fit_share_the_references_budget(tmp_path, monkeypatch, off_square,
                                                      varied_run):
     """Serially the logs of one fit draw on one budget of AUTO_MAX_SAMPLES: two logs each
