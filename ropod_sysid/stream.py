@@ -108,9 +108,8 @@ from ropod_sysid.regressor import (
 )
 from ropod_sysid.solve import Triangles
 from ropod_sysid.validate import (
-    FORCE_THRESHOLD,
     OBSERVER_CUTOFF_HZ,
-    TORQUE_THRESHOLD,
+    ObserverStats,
     observer_samples,
     observer_step,
 )
@@ -123,19 +122,6 @@ ROWS_IN_FLIGHT = 2  # blocks whose rows the worker thread may still be reducing
 
 # ---------------------------------------------------------------------------------------------
 # results
-
-
-@dataclass
-class ObserverStats:
-    """Running figures of the low-passed disturbance estimate F̂_b over the kept samples."""
-
-    sum_sq: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    max_abs: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    above_force: int = 0
-    above_torque: int = 0
-    count: int = 0
-    t: list[np.ndarray] = field(default_factory=list)
-    f_hat: list[np.ndarray] = field(default_factory=list)
 
 
 @dataclass
@@ -410,18 +396,7 @@ class _Blocks:
         f_b = self.model.disturbance(st, self.params, at.qdd, at.tau, self.friction)
         f_hat = self.lowpass(f_b)
         keep = (idx >= self.trim) & ((idx < ob - self.trim) if last else True)
-        f_hat, t_kept = f_hat[keep], at.t[keep]
-        obs = self.obs
-        obs.sum_sq += (f_hat ** 2).sum(axis=0)
-        if len(f_hat):
-            obs.max_abs = np.maximum(obs.max_abs, np.abs(f_hat).max(axis=0))
-        obs.above_force += int(np.count_nonzero(np.hypot(f_hat[:, 0], f_hat[:, 1])
-                                                > FORCE_THRESHOLD))
-        obs.above_torque += int(np.count_nonzero(np.abs(f_hat[:, 2]) > TORQUE_THRESHOLD))
-        obs.count += len(f_hat)
-        if self.keep_series:
-            obs.t.append(t_kept.copy())
-            obs.f_hat.append(f_hat.copy())
+        self.obs.add(f_hat[keep], at.t[keep], self.keep_series)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -34,6 +34,33 @@ OBSERVER_CUTOFF_HZ = 10.0  # Sec. VII-B
 
 
 @dataclass
+class ObserverStats:
+    """Running figures of the low-passed disturbance estimate F̂_b over the kept samples."""
+
+    sum_sq: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    max_abs: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    above_force: int = 0
+    above_torque: int = 0
+    count: int = 0
+    t: list[np.ndarray] = field(default_factory=list)
+    f_hat: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, f_hat: np.ndarray, t: np.ndarray, keep_series: bool) -> None:
+        """Take the low-passed estimates ``f_hat`` (M, 3) at the kept samples' times ``t``
+        (M,) [s] into the figures (and their series, with ``keep_series``)."""
+        self.sum_sq += (f_hat ** 2).sum(axis=0)
+        if len(f_hat):
+            self.max_abs = np.maximum(self.max_abs, np.abs(f_hat).max(axis=0))
+        self.above_force += int(np.count_nonzero(np.hypot(f_hat[:, 0], f_hat[:, 1])
+                                                 > FORCE_THRESHOLD))
+        self.above_torque += int(np.count_nonzero(np.abs(f_hat[:, 2]) > TORQUE_THRESHOLD))
+        self.count += len(f_hat)
+        if keep_series:
+            self.t.append(t.copy())
+            self.f_hat.append(f_hat.copy())
+
+
+@dataclass
 class LogValidation:
     """Figures of one validation log."""
 
