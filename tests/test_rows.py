@@ -22,6 +22,7 @@ from ropod_sysid.regressor import (
     filtered_system,
     preprocess,
     raw_system,
+    row_average,
     row_inputs,
     triangles,
 )
@@ -76,6 +77,21 @@ def test_rows_are_states_at_the_row_samples_with_averaged_torques(off_square, ru
     j = 17
     np.testing.assert_allclose(rows.tau[j], pre.tau[idx[j] - 2: idx[j] + 3].mean(axis=0),
                                rtol=1e-14)
+
+
+def test_row_average_is_the_weighted_window_of_each_row():
+    """Evenly spaced rows (strided views) and any rows (gathers) give Σ_j w_j x[i − h + j],
+    also on the delay bracket's (N, A, n) torques."""
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(400, 8, 5))
+    w = rng.normal(size=9)  # h = 4
+    even = 7 + 6 * np.arange(60)
+    odd = np.array([4, 5, 30, 31, 200, 395])
+    for index in (even, odd, even[:1]):
+        windows = np.stack([x[i - 4: i + 5] for i in index])  # (rows, 9, 8, 5)
+        want = np.einsum("j,rjab->rab", w, windows)
+        np.testing.assert_allclose(row_average(x, index, w), want, rtol=1e-13, atol=1e-14)
+    assert row_average(x, even, w).shape == (60, 8, 5)
 
 
 @pytest.mark.parametrize(("span", "step", "moved"), [("0.1s", 2, 0.01), ("0.2s", 4, 0.025)])
