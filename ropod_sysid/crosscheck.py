@@ -242,7 +242,7 @@ def reference_windows(lengths: Sequence[int], budget: int,
     if total <= budget:
         return [[(0, n)] for n in lengths]
     each = budget // count
-    align = 2520 if each >= 2520 else 60
+    align = window_align(budget, count)
     starts = np.cumsum([0, *lengths])
     out: list[list[tuple[int, int]]] = [[] for _ in lengths]
     stop = 0
@@ -259,6 +259,11 @@ def reference_windows(lengths: Sequence[int], budget: int,
             if hi - lo >= max(each // 4, 1):
                 out[j].append((lo - int(starts[j]), hi - int(starts[j])))
     return out
+
+
+def window_align(budget: int, count: int = REFERENCE_WINDOWS) -> int:
+    """The samples that :func:`reference_windows`' windows start on a multiple of."""
+    return 2520 if budget // count >= 2520 else 60
 
 
 def window_samples(logs: Sequence[Log], budget: int | None) -> list[Log]:

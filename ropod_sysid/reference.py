@@ -96,6 +96,7 @@ class ReferenceBudget:
 
     left: int | None
     windows: dict[str, list[tuple[int, int]]] | None = None
+    align: int = 1  # the windows start on multiples of it in each piece (window_align)
 
     @classmethod
     def for_logs(cls, mode: bool | str, names: list[str], fewest: list[int],
@@ -109,14 +110,22 @@ class ReferenceBudget:
         if budget is None or sum(fewest) <= crosscheck.AUTO_MAX_SAMPLES:
             return cls(budget)
         plan = crosscheck.reference_windows([estimated(n) for n in names], budget)
-        return cls(budget, dict(zip(names, plan, strict=True)))
+        return cls(budget, dict(zip(names, plan, strict=True)),
+                   crosscheck.window_align(budget))
 
     def of_piece(self, name: str, first: int) -> list[tuple[int, float]]:
         """The windows of the piece of log ``name`` from its sample ``first`` on, in the
-        piece's samples (a window's stop may lie past the piece's end)."""
+        piece's samples (a window's stop may lie past the piece's end). A window's start moves
+        up to the next multiple of :attr:`align` from the piece's start (--split-gaps: a
+        piece may start anywhere), so that its rows fitted as a log of their own are on the
+        piece's row grid, as they are on the log's without gaps."""
         if self.windows is not None:
-            return [(max(a - first, 0), b - first) for a, b in self.windows.get(name, [])
-                    if b > first]
+            out: list[tuple[int, float]] = []
+            for a, b in self.windows.get(name, []):
+                start = -(-max(a - first, 0) // self.align) * self.align
+                if start < b - first:
+                    out.append((start, b - first))
+            return out
         if self.left is None:
             return [(0, math.inf)]
         return [(0, self.left)] if self.left > 0 else []

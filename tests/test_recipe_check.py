@@ -18,6 +18,7 @@ from ropod_sysid.fit import FitOptions, fit_files, fit_logs
 from ropod_sysid.io.csvlog import write_csv_log
 from ropod_sysid.platform import save_platform
 from ropod_sysid.recipe import Span
+from ropod_sysid.reference import ReferenceBudget
 from ropod_sysid.simulate import Setpoints, simulate
 from ropod_sysid.summary import identifiability_verdict
 
@@ -145,6 +146,17 @@ def test_automatic_check_of_long_logs_on_windows_spread_over_them(monkeypatch, o
         [(423_360, 473_360), (1_323_000, 1_373_000), (2_222_640, 2_272_640),
          (3_124_800, 3_174_800)]]
     assert crosscheck.reference_windows([3_000, 100], 10_000) == [[(0, 3000)], [(0, 100)]]
+    # --split-gaps: a piece from any sample on gets its windows on multiples of the alignment
+    # counted from its own start (the piece's row grid), those it reaches at all
+    assert ReferenceBudget.for_logs("auto", ["log"], [12_001], lambda _: 12_001).align == 60
+    budget = ReferenceBudget(200_000, {"log": crosscheck.reference_windows([3_600_060],
+                                                                          200_000)[0]},
+                             crosscheck.window_align(200_000))
+    assert (budget.align, budget.of_piece("log", 0)) == (2520, budget.windows["log"])
+    assert budget.of_piece("log", 1_000_003) == [(325_080, 372_997), (1_224_720, 1_272_637),
+                                                 (2_126_880, 2_174_797)]
+    assert budget.of_piece("log", 1_372_000) == [(0, 1_000), (851_760, 900_640),
+                                                 (1_753_920, 1_802_800)]
     long = fit_logs([varied_run], off_square)
     plain = fit_logs([varied_run], off_square, FitOptions(recipe_check=False))
     windows = [varied_run.slice(a, b) for a, b in
