@@ -547,10 +547,14 @@ def formed_prefix(formed: Sequence[Reference | None], platform: Platform, option
     the reference was formed on in the fit's pass (:attr:`Reference.main`,
     :attr:`Reference.pieces`), and whether those are windows spread over the logs; None
     where it was not formed for every log, or at another span or delay than ``reference``
-    asks."""
+    asks. Where every window was left out (too short for the reference recipe), the
+    InputError of the first, as fitting the same windows in memory raises it."""
     if not formed or any(r is None for r in formed):
         return None
     refs = [r for r in formed if r is not None and r.pieces]
+    failures = [r.failure for r in formed if r is not None and r.failure]
+    if not refs and failures:
+        raise InputError(failures[0])
     at = reference.reduce_delay()
     if not refs or any(r.span != reference.span or r.delay != at for r in refs):
         return None

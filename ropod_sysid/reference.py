@@ -43,6 +43,7 @@ class PieceReference:
     delay: float | DelayBracket | None
     windows: list[tuple[StreamResult, Triangles | None]]
     spread: bool = False  # a window starts after the piece's first sample
+    failure: str | None = None  # why the first window left out was (its InputError)
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,7 @@ class Reference:
     main: list[tuple[str, Triangles, list[str], LogPlot | None]]
     partial: bool = False  # the windows leave out some of the log
     spread: bool = False  # they are spread over it (ReferenceBudget.windows), not its first
+    failure: str | None = None  # no window: why the first left out was (PieceReference)
 
     @staticmethod
     def of_pieces(pieces: list[tuple[str, Triangles, list[str], LogPlot | None]],
@@ -74,7 +76,9 @@ class Reference:
                    or any(len(ref.windows) > 1 or ref.windows[0][1] is not None
                           for _, ref in got))
         if not got:
-            return Reference(None, None, [], [], partial)
+            failure = next((ref.failure for ref in refs if ref is not None and ref.failure),
+                           None)
+            return Reference(None, None, [], [], partial, failure=failure)
         span, delay = got[0][1].span, got[0][1].delay
         if any(ref.span != span or ref.delay != delay for _, ref in got):
             return None
@@ -206,6 +210,7 @@ class ReferenceTee:
         self.spread = False  # a window opened after the piece's first sample
         self.span: Span | None = None
         self.delay: float | DelayBracket | None = None
+        self.failure: str | None = None  # the first window's left out, why
 
     def start(self, dt: float, jitter: float = 0.0) -> None:
         self.dt, self.jitter = dt, jitter
@@ -224,7 +229,8 @@ class ReferenceTee:
             j = int(min(n, stop - self.at))
             try:
                 self.ref.push(samples if (i, j) == (0, n) else samples.take(i, j))
-            except InputError:
+            except InputError as exc:
+                self.failure = self.failure or str(exc)
                 self.blocks.drop_kept(self.open[2])
                 self.ref.close()
                 self.ref = None
@@ -268,14 +274,15 @@ class ReferenceTee:
         self.ref = None
         try:
             ref.flush()
-        except InputError:
-            self._left_out(ref, index, whole)
+        except InputError as exc:
+            self._left_out(ref, index, whole, exc)
         else:
             self.closing.append((ref, index, whole))
 
-    def _left_out(self, ref: _Blocks, index: int, whole: bool) -> None:
-        """Window ``ref`` cannot be fitted by the reference recipe: the fit's rows over it are
-        not kept; a whole piece too short drops the reference."""
+    def _left_out(self, ref: _Blocks, index: int, whole: bool, exc: InputError) -> None:
+        """Window ``ref`` cannot be fitted by the reference recipe (``exc`` says why): the
+        fit's rows over it are not kept; a whole piece too short drops the reference."""
+        self.failure = self.failure or str(exc)
         ref.close()
         self.blocks.drop_kept(index)
         if whole:
@@ -289,8 +296,8 @@ class ReferenceTee:
         for ref, index, whole in closing:
             try:
                 tri = ref.finish()[0]
-            except InputError:
-                self._left_out(ref, index, whole)
+            except InputError as exc:
+                self._left_out(ref, index, whole, exc)
             else:
                 ref.close()
                 self.done.append((StreamResult(ref.source, tri, [], ref.avail, ref.dt, ref.k),
@@ -310,7 +317,7 @@ class ReferenceTee:
         windows = [(res, None if whole else kept[index]) for res, index, whole in self.done
                    if index not in dropped and (whole or kept[index] is not None)]
         if not windows:
-            return PieceReference(None, None, [])
+            return PieceReference(None, None, [], failure=self.failure)
         return PieceReference(self.span, self.delay, windows, self.spread)
 
     def refund(self) -> None:

@@ -368,7 +368,8 @@ def test_windows_too_short_for_the_reference_in_the_pass(tmp_path, monkeypatch, 
                                                          varied_run):
     """Streamed windows too short for the reference recipe's span are each left out at their
     end (their last samples reduced, :meth:`ropod_sysid.stream._Blocks.flush`), the fit's rows
-    over them not kept: σ stays the jackknife's, with the note that the check was left out."""
+    over them not kept: σ stays the jackknife's, with the note that the check was left out and
+    why, as the in-memory fit of the same windows says it."""
     from ropod_sysid import reference
     from ropod_sysid.chunks import fewest_samples
 
@@ -383,9 +384,12 @@ def test_windows_too_short_for_the_reference_in_the_pass(tmp_path, monkeypatch, 
     assert short.recipe_shift is None
     np.testing.assert_allclose(short.solution.std, plain.solution.std, rtol=1e-9)
     np.testing.assert_allclose(short.solution.values, plain.solution.values, rtol=1e-9)
-    assert short.logs[0].notes[-1].startswith(
-        f"recipe check left out: the logs have {plain.samples:,} samples, more than the "
-        f"{fewest_samples(log) - 1:,} up to which fit runs it by default")
+    memory = fit_logs([varied_run], off_square)
+    assert short.logs[0].notes[-1] == memory.logs[0].notes[-1].replace(
+        varied_run.source, str(log)) == (
+        "recipe check left out: its fits of part of the logs (--smoother quartic --span 0.1s "
+        f"--input-delay auto) failed: {log}: 15 samples are too few for a smoother span of 21 "
+        "samples (0.105 s); record a longer run or use a shorter --span")
 
 
 def test_logs_of_one_fit_share_the_references_budget(tmp_path, monkeypatch, off_square,
